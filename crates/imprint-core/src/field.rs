@@ -1,0 +1,153 @@
+//! The resources of H §1-2: a discrete boundary (points on a grid) and the narrow-band
+//! distance field built from it.
+
+use crate::GridSpec;
+use glam::{UVec3, Vec3};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// Which point stands for a surface cell.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum BoundaryVariant {
+    /// H's discrete boundary: the cell centre (accurate only to a cell).
+    Centre,
+    /// Ours: the point of the surface closest to the cell centre (sub-voxel accurate).
+    #[default]
+    Closest,
+}
+
+/// One point per surface cell, cells in increasing linear index (so the order, and every
+/// tie-break that depends on it, is the same on every backend and thread count).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Boundary {
+    pub spec: GridSpec,
+    pub variant: BoundaryVariant,
+    /// Linear indices of the surface cells, strictly increasing.
+    pub cells: Vec<u32>,
+    /// The boundary point of each surface cell, world units.
+    pub points: Vec<Vec3>,
+}
+
+impl Boundary {
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+}
+
+/// How a field is read between cell centres (H Fig. 5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Sampling {
+    /// "A": trilinear blend of the closest-point vectors, distance = its length (exact on a plane).
+    #[default]
+    Vector,
+    /// "B": trilinear blend of the distances (not exact: distance is not linear between cells).
+    Distance,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldSample {
+    pub distance: f32,
+    /// Toward the closest boundary point (p - x); zero when unknown.
+    pub vector: Vec3,
+    /// False when any of the 8 cells around the point is far (outside the band or the grid).
+    pub in_band: bool,
+}
+
+/// A narrow-band unsigned distance field: per cell, the distance to the nearest boundary point
+/// within `band` cells and which point that is. Cells farther than the band are "far": their
+/// distance is clamped to `far_value()` and their `nearest` is [`DistanceField::FAR`].
+#[derive(Clone, Debug)]
+pub struct DistanceField {
+    pub spec: GridSpec,
+    /// Half-width of the band, in cells (H's `a`).
+    pub band: f32,
+    /// Distance per cell, world units.
+    pub dist: Vec<f32>,
+    /// Index into `points` of the nearest boundary point, or `FAR`.
+    pub nearest: Vec<u32>,
+    /// The boundary points the field was built from.
+    pub points: Arc<Vec<Vec3>>,
+}
+
+impl DistanceField {
+    pub const FAR: u32 = u32::MAX;
+
+    /// The distance stored in far cells: the band's half-width in world units.
+    pub fn far_value(&self) -> f32 {
+        self.band * self.spec.cell
+    }
+
+    #[inline]
+    pub fn is_far(&self, index: usize) -> bool {
+        self.nearest[index] == Self::FAR
+    }
+
+    /// Closest-point vector of a cell (toward the surface), zero for far cells.
+    #[inline]
+    pub fn vector(&self, index: usize) -> Vec3 {
+        match self.nearest[index] {
+            Self::FAR => Vec3::ZERO,
+            n => self.points[n as usize] - self.spec.center(self.spec.coords(index)),
+        }
+    }
+
+    /// Number of cells inside the band.
+    pub fn band_cells(&self) -> usize {
+        self.nearest.iter().filter(|&&n| n != Self::FAR).count()
+    }
+
+    /// The field at any point, by trilinear interpolation of the 8 surrounding cells.
+    pub fn sample(&self, p: Vec3, mode: Sampling) -> FieldSample {
+        let far = FieldSample {
+            distance: self.far_value(),
+            vector: Vec3::ZERO,
+            in_band: false,
+        };
+        let c = self.spec.to_cell(p);
+        let base = c.floor();
+        let t = c - base;
+        let b = base.as_ivec3();
+        let dims = self.spec.dims.as_ivec3();
+        if b.cmplt(glam::IVec3::ZERO).any() || (b + 1).cmpge(dims).any() {
+            // Outside the grid, or in its outermost half cell: clamp to the nearest cell.
+            let cl = c.round().as_ivec3();
+            if !self.spec.contains(cl) {
+                return far;
+            }
+            let i = self.spec.index(cl.as_uvec3());
+            return FieldSample {
+                distance: self.dist[i],
+                vector: self.vector(i),
+                in_band: !self.is_far(i),
+            };
+        }
+        let mut dist = 0.0;
+        let mut vec = Vec3::ZERO;
+        let mut all_in = true;
+        for k in 0..8u32 {
+            let o = UVec3::new(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+            let w = (if o.x == 1 { t.x } else { 1.0 - t.x })
+                * (if o.y == 1 { t.y } else { 1.0 - t.y })
+                * (if o.z == 1 { t.z } else { 1.0 - t.z });
+            let i = self.spec.index(b.as_uvec3() + o);
+            all_in &= !self.is_far(i);
+            dist += w * self.dist[i];
+            vec += w * self.vector(i);
+        }
+        match mode {
+            Sampling::Vector if all_in => FieldSample {
+                distance: vec.length(),
+                vector: vec,
+                in_band: true,
+            },
+            _ => FieldSample {
+                distance: dist,
+                vector: vec,
+                in_band: all_in,
+            },
+        }
+    }
+}

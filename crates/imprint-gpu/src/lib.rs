@@ -1,0 +1,1 @@
+//! wgpu device handling: written by the GPU work.

@@ -1,0 +1,8 @@
+//! imprint-stages: one module per stage, each with its parameters (serde), a CPU path (the
+//! reference), a GPU path (wgpu compute, tested against the CPU), and its error metrics.
+//! Stages know nothing of RON files or scheduling: the graph crate calls them.
+
+pub mod mesh;
+pub mod metrics;
+pub mod sdf;
+pub mod voxel;

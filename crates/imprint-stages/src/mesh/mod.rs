@@ -1,0 +1,1 @@
+//! Mesh source: written next.

@@ -1,0 +1,1 @@
+//! GPU distance field: written by the GPU work.

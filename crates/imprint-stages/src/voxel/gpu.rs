@@ -1,0 +1,1 @@
+//! GPU voxelisation: written by the GPU work.
