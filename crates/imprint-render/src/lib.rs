@@ -1,1 +1,24 @@
+//! imprint-render: turning resources into files people and tools read. No physics here.
+//!
+//! - [`npy`]: NumPy `.npy` arrays (f32, u16, u8), so fields load with `numpy.load`;
+//! - [`field_io`]: a distance field as `_dist.npy`, `_vec.npy` and a `_field.json`;
+//! - [`colormap`]: viridis (sequential) and RdBu (diverging) colour tables;
+//! - [`font`]: a hand-made 5x7 bitmap font for labels, so pictures need no font files;
+//! - [`slice`]: a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
+//! - [`png`]: PNG output.
+//!
+//! Every file is written through `imprint_core::io::atomic_write`: a reader never finds a
+//! half-written file under its final name.
 
+pub mod colormap;
+pub mod field_io;
+pub mod font;
+pub mod npy;
+pub mod png;
+pub mod slice;
+
+pub use colormap::Colormap;
+pub use field_io::{FieldMeta, write_field};
+pub use npy::{read_npy_f32, write_npy_f32};
+pub use png::write_png;
+pub use slice::{Axis, SliceIndex, SliceOptions, render_field_slice, write_field_slice};

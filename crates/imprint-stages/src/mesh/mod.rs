@@ -1,1 +1,447 @@
-//! Mesh source: written next.
+//! Mesh source: a file or a primitive, fitted into a box once, then deformed as a function
+//! of time by a list of motions (rigid keyframes, breathe, twist, bend, wave).
+//!
+//! Built once ([`MeshSource::new`]), evaluated per frame ([`MeshSource::at`]). Every motion
+//! is a per-vertex map whose parameters come from the rest mesh's bounding box; evaluation
+//! is parallel over vertices (rayon) and gives the same bytes for any thread count.
+
+pub mod motion;
+pub mod params;
+
+pub use params::{Axis, Fit, MeshParams, Motion, Primitive, RigidKey, Rotation, RotationAxis};
+
+use glam::Vec3;
+use imprint_core::mesh::primitives;
+use imprint_core::{Aabb, Mesh, Result};
+use motion::{Compiled, Deform};
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Below this many items per task rayon's overhead outweighs the work.
+const MIN_PER_TASK: usize = 4096;
+
+/// A mesh node's state: the fitted rest mesh and the compiled motions.
+#[derive(Clone, Debug)]
+pub struct MeshSource {
+    rest: Mesh,
+    rest_bounds: Aabb,
+    motions: Vec<Compiled>,
+    is_static: bool,
+    /// Triangles around each vertex (CSR, in triangle order): lets normals be gathered per
+    /// vertex in parallel with the same sums, in the same order, as `Mesh::compute_normals`.
+    vertex_start: Vec<u32>,
+    vertex_triangles: Vec<u32>,
+}
+
+impl MeshSource {
+    /// Validates `params`, loads the OBJ (`path` relative to `base_dir`) or builds the
+    /// primitive, and applies the fit.
+    pub fn new(params: &MeshParams, base_dir: &Path) -> Result<MeshSource> {
+        params.validate()?;
+        let mut rest = match (&params.path, &params.primitive) {
+            (Some(path), _) => Mesh::load_obj(&base_dir.join(path))?,
+            (None, Some(prim)) => build_primitive(prim),
+            (None, None) => unreachable!("validate() requires a path or a primitive"),
+        };
+        if let Some(fit) = params.fit {
+            let m = rest.fit_transform(fit.size, fit.center);
+            rest.transform(m);
+        }
+        let rest_bounds = rest.bounds();
+        let motions = params
+            .motion
+            .iter()
+            .map(|m| Compiled::new(m, &rest_bounds))
+            .collect();
+        let is_static = params.motion.iter().all(Motion::is_time_invariant);
+        let (vertex_start, vertex_triangles) = vertex_triangles(&rest);
+        Ok(MeshSource {
+            rest,
+            rest_bounds,
+            motions,
+            is_static,
+            vertex_start,
+            vertex_triangles,
+        })
+    }
+
+    /// The fitted mesh before any motion.
+    pub fn rest(&self) -> &Mesh {
+        &self.rest
+    }
+
+    /// The rest mesh's bounding box: the frame every motion's centre and ends refer to.
+    pub fn rest_bounds(&self) -> Aabb {
+        self.rest_bounds
+    }
+
+    /// True when the shape does not change with time (no motion, or only time-invariant
+    /// ones): consumers of this mesh need not run again.
+    pub fn is_static(&self) -> bool {
+        self.is_static
+    }
+
+    /// The deformed mesh at `time` (seconds), normals recomputed.
+    pub fn at(&self, time: f32) -> Mesh {
+        let mut out = Mesh::default();
+        self.at_into(time, &mut out);
+        out
+    }
+
+    /// Like [`at`](Self::at), reusing `out`'s buffers (no allocation after the first frame).
+    pub fn at_into(&self, time: f32, out: &mut Mesh) {
+        debug_assert!(time.is_finite(), "mesh time must be finite, got {time}");
+        if self.motions.is_empty() {
+            out.clone_from(&self.rest);
+            return;
+        }
+        let deforms: Vec<Deform> = self.motions.iter().map(|m| m.at(time)).collect();
+        self.deform_positions(&deforms, &mut out.positions);
+        out.triangles.clone_from(&self.rest.triangles);
+        out.uvs.clone_from(&self.rest.uvs);
+        self.compute_normals(&out.positions, &mut out.normals);
+    }
+
+    /// Bounding box of the mesh over the given times (sampled, so a conservative grid for a
+    /// moving mesh should add a margin or sample densely).
+    pub fn sampled_bounds(&self, times: impl IntoIterator<Item = f32>) -> Aabb {
+        let mut b = self.rest_bounds;
+        if self.motions.is_empty() {
+            return b;
+        }
+        let mut positions = Vec::new();
+        for t in times {
+            let deforms: Vec<Deform> = self.motions.iter().map(|m| m.at(t)).collect();
+            self.deform_positions(&deforms, &mut positions);
+            b = b.union(&Aabb::from_points(positions.iter().copied()));
+        }
+        b
+    }
+
+    fn deform_positions(&self, deforms: &[Deform], out: &mut Vec<Vec3>) {
+        out.resize(self.rest.positions.len(), Vec3::ZERO);
+        out.par_iter_mut()
+            .zip(self.rest.positions.par_iter())
+            .with_min_len(MIN_PER_TASK)
+            .for_each(|(o, &p)| *o = deforms.iter().fold(p, |p, d| d.apply(p)));
+    }
+
+    /// Area-weighted vertex normals, bit-identical to `Mesh::compute_normals`.
+    fn compute_normals(&self, positions: &[Vec3], normals: &mut Vec<Vec3>) {
+        let face: Vec<Vec3> = self
+            .rest
+            .triangles
+            .par_iter()
+            .with_min_len(MIN_PER_TASK)
+            .map(|&[a, b, c]| {
+                let (a, b, c) = (
+                    positions[a as usize],
+                    positions[b as usize],
+                    positions[c as usize],
+                );
+                (b - a).cross(c - a)
+            })
+            .collect();
+        normals.resize(positions.len(), Vec3::ZERO);
+        normals
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(MIN_PER_TASK)
+            .for_each(|(v, n)| {
+                let range = self.vertex_start[v] as usize..self.vertex_start[v + 1] as usize;
+                let sum = self.vertex_triangles[range]
+                    .iter()
+                    .fold(Vec3::ZERO, |s, &t| s + face[t as usize]);
+                *n = sum.normalize_or_zero();
+            });
+    }
+}
+
+/// The primitive at its declared size, centred on the origin (validated beforehand).
+fn build_primitive(p: &Primitive) -> Mesh {
+    match *p {
+        Primitive::Sphere {
+            radius,
+            segments,
+            rings,
+        } => primitives::uv_sphere(radius, segments, rings),
+        Primitive::Box { size, subdivisions } => primitives::cuboid(0.5 * size, subdivisions),
+        Primitive::Plane { size, subdivisions } => primitives::plane(size, subdivisions),
+        Primitive::Torus {
+            major,
+            minor,
+            segments,
+            sides,
+        } => primitives::torus(major, minor, segments, sides),
+    }
+}
+
+/// Counting sort of (vertex, triangle) incidences; a triangle naming a vertex twice is
+/// listed twice, as `compute_normals` adds it twice.
+fn vertex_triangles(mesh: &Mesh) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; mesh.positions.len() + 1];
+    for tri in &mesh.triangles {
+        for &v in tri {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 1..start.len() {
+        start[i] += start[i - 1];
+    }
+    let mut next = start.clone();
+    let mut list = vec![0u32; 3 * mesh.triangles.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &v in tri {
+            list[next[v as usize] as usize] = t as u32;
+            next[v as usize] += 1;
+        }
+    }
+    (start, list)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imprint_core::Error;
+    use std::path::PathBuf;
+
+    fn workspace_root() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    }
+
+    fn params(text: &str) -> MeshParams {
+        ron::from_str(text).unwrap_or_else(|e| panic!("{text}: {e}"))
+    }
+
+    fn source(text: &str) -> MeshSource {
+        MeshSource::new(&params(text), &workspace_root()).unwrap()
+    }
+
+    #[test]
+    fn primitives_have_their_triangle_counts() {
+        for (text, want) in [
+            ("Sphere(radius: 0.5, segments: 16, rings: 8)", 2 * 16 * 7),
+            ("Sphere(radius: 0.5)", 2 * 64 * 31),
+            ("Box(size: (1, 2, 3), subdivisions: 3)", 6 * 2 * 9),
+            ("Box(size: (1, 2, 3))", 6 * 2 * 16 * 16),
+            ("Plane(size: 2, subdivisions: 5)", 2 * 25),
+            (
+                "Torus(major: 1, minor: 0.25, segments: 12, sides: 6)",
+                2 * 12 * 6,
+            ),
+        ] {
+            let s = source(&format!("(primitive: {text})"));
+            assert_eq!(s.rest().triangles.len(), want, "{text}");
+            assert_eq!(
+                params(&format!("(primitive: {text})"))
+                    .primitive
+                    .unwrap()
+                    .triangle_count(),
+                want as u64
+            );
+        }
+        // Box size is the full extent, not the half.
+        let b = source("(primitive: Box(size: (1, 2, 3), subdivisions: 1))").rest_bounds();
+        assert!(
+            (b.size() - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6,
+            "{:?}",
+            b
+        );
+    }
+
+    #[test]
+    fn fit_sets_longest_side_and_centre() {
+        let s = source("(primitive: Box(size: (1, 4, 2)), fit: (size: 2, center: (1, -1, 0.5)))");
+        let b = s.rest().bounds();
+        assert!(
+            (b.size() - Vec3::new(0.5, 2.0, 1.0)).length() < 1e-5,
+            "{:?}",
+            b.size()
+        );
+        assert!(
+            (b.center() - Vec3::new(1.0, -1.0, 0.5)).length() < 1e-5,
+            "{:?}",
+            b.center()
+        );
+        assert_eq!(s.rest_bounds(), b);
+
+        let bunny = source(r#"(path: "assets/meshes/stanford-bunny.obj", fit: (size: 1.0))"#);
+        let b = bunny.rest_bounds();
+        assert!((b.size().max_element() - 1.0).abs() < 1e-5);
+        assert!(b.center().length() < 1e-5);
+        // Without a fit the file's own coordinates are kept (the bunny is ~0.15 across).
+        let raw = source(r#"(path: "assets/meshes/stanford-bunny.obj")"#);
+        assert!(raw.rest_bounds().size().max_element() < 0.5);
+    }
+
+    #[test]
+    fn missing_obj_names_the_path() {
+        let e = MeshSource::new(
+            &params(r#"(path: "meshes/no-such-mesh.obj")"#),
+            Path::new("/nowhere"),
+        )
+        .unwrap_err();
+        assert!(matches!(e, Error::Mesh { .. }), "{e:?}");
+        assert!(
+            e.to_string().contains("/nowhere/meshes/no-such-mesh.obj"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn invalid_params_are_refused_before_loading() {
+        let e = MeshSource::new(
+            &params(r#"(path: "missing.obj", motion: [Breathe(amplitude: 0.1, period: 0)])"#),
+            Path::new("."),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("motion[0] Breathe.period must be > 0"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn static_and_moving_meshes() {
+        let plain = source("(primitive: Sphere(radius: 1, segments: 8, rings: 4))");
+        assert!(plain.is_static());
+        assert_eq!(&plain.at(3.0), plain.rest());
+
+        // A constant twist is static but not the rest shape.
+        let twisted =
+            source("(primitive: Box(size: (1, 1, 1)), motion: [Twist(axis: Y, degrees: 45)])");
+        assert!(twisted.is_static());
+        assert_eq!(twisted.at(0.0), twisted.at(5.0));
+        assert_ne!(twisted.at(0.0).positions, twisted.rest().positions);
+
+        let breathing = source(
+            "(primitive: Box(size: (1, 1, 1)), motion: [Breathe(amplitude: 0.1, period: 1)])",
+        );
+        assert!(!breathing.is_static());
+        let m = breathing.at(0.25);
+        assert_eq!(m.triangles, breathing.rest().triangles);
+        assert!((m.bounds().size().x - 1.1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn normals_match_compute_normals_exactly() {
+        let s = source(
+            r#"(path: "assets/meshes/stanford-bunny.obj", fit: (size: 1.0),
+                motion: [Breathe(amplitude: 0.05, period: 2.0), Twist(axis: Y, degrees: 30, period: 3),
+                         Bend(axis: Y, degrees: 40, period: 5), Wave(amplitude: 0.01, wavelength: 0.3, speed: 0.2),
+                         Rigid(keys: [(time: 0), (time: 1, translate: (0, 1, 0), rotate: (axis: (1, 1, 0), degrees: 60))])])"#,
+        );
+        let m = s.at(0.7);
+        let mut reference = m.clone();
+        reference.compute_normals();
+        assert_eq!(m.normals, reference.normals);
+        m.validate("bunny").unwrap();
+        assert_eq!(m.uvs, s.rest().uvs);
+    }
+
+    #[test]
+    fn thread_count_does_not_change_the_result() {
+        let s = source(
+            r#"(path: "assets/meshes/stanford-bunny.obj", fit: (size: 1.0),
+                motion: [Breathe(amplitude: 0.05, period: 2.0), Twist(axis: Y, degrees: 30, period: 1.3)])"#,
+        );
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let four = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        let a = one.install(|| s.at(0.37));
+        let b = four.install(|| s.at(0.37));
+        assert_eq!(a, b);
+        // Reusing buffers gives the same mesh.
+        let mut c = s.at(1.9);
+        s.at_into(0.37, &mut c);
+        assert_eq!(a, c);
+    }
+
+    #[test]
+    fn motions_compose_in_order() {
+        // Breathe then Rigid: the translation is not scaled; Rigid then Breathe about the
+        // rest centre: it is.
+        let p = |order: &str| {
+            source(&format!(
+                "(primitive: Box(size: (1, 1, 1), subdivisions: 1), motion: [{order}])"
+            ))
+            .at(0.25)
+            .bounds()
+            .center()
+        };
+        let breathe = "Breathe(amplitude: 0.5, period: 1)";
+        let rigid = "Rigid(keys: [(time: 0, translate: (1, 0, 0))])";
+        assert!((p(&format!("{breathe}, {rigid}")) - Vec3::X).length() < 1e-6);
+        assert!((p(&format!("{rigid}, {breathe}")) - 1.5 * Vec3::X).length() < 1e-6);
+    }
+
+    #[test]
+    fn sampled_bounds_cover_the_motion() {
+        let s = source(
+            "(primitive: Box(size: (1, 1, 1)), motion: [Breathe(amplitude: 0.2, period: 1)])",
+        );
+        let b = s.sampled_bounds((0..8).map(|i| i as f32 / 8.0));
+        assert!((b.size().x - 1.2).abs() < 1e-6, "{:?}", b);
+    }
+
+    /// Per-frame cost on the bunny; prints, asserts nothing (timings belong in benchmarks).
+    /// `cargo test --release -p imprint-stages --lib mesh::tests::bunny_frame_time -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn bunny_frame_time() {
+        use std::time::Instant;
+        let bunny = |motion: &str| {
+            source(&format!(
+                r#"(path: "assets/meshes/stanford-bunny.obj", fit: (size: 1.0), motion: [{motion}])"#
+            ))
+        };
+        let cases = [
+            (
+                "Breathe+Twist",
+                "Breathe(amplitude: 0.05, period: 2.0), Twist(axis: Y, degrees: 30)",
+            ),
+            ("Breathe", "Breathe(amplitude: 0.05, period: 2.0)"),
+            ("Twist", "Twist(axis: Y, degrees: 30, period: 2)"),
+            ("Bend", "Bend(axis: Y, degrees: 30, period: 2)"),
+            ("Wave", "Wave(amplitude: 0.01, wavelength: 0.2, speed: 0.5)"),
+            (
+                "Rigid",
+                "Rigid(keys: [(time: 0), (time: 4, rotate: (axis: Y, degrees: 90))])",
+            ),
+        ];
+        for threads in [1, rayon::current_num_threads()] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for (name, motion) in cases {
+                let s = bunny(motion);
+                let mut out = s.at(0.0);
+                let frames = 200;
+                let (deform, total) = pool.install(|| {
+                    let deforms: Vec<Deform> = s.motions.iter().map(|m| m.at(0.5)).collect();
+                    let t0 = Instant::now();
+                    for _ in 0..frames {
+                        s.deform_positions(&deforms, &mut out.positions);
+                    }
+                    let deform = t0.elapsed() / frames;
+                    let t0 = Instant::now();
+                    for f in 0..frames {
+                        s.at_into(f as f32 / 60.0, &mut out);
+                    }
+                    (deform, t0.elapsed() / frames)
+                });
+                println!(
+                    "bunny {} vertices, {threads} thread(s), {name}: positions {deform:?}/frame, with normals {total:?}/frame",
+                    s.rest().positions.len()
+                );
+            }
+        }
+    }
+}

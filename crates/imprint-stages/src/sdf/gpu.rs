@@ -1,1 +1,184 @@
-//! GPU distance field: written by the GPU work.
+//! GPU distance field (`shaders/sdf/field.wgsl`), the same field as [`super::cpu`].
+//!
+//! Each surface cell splats its point into the ball of `band` cells around it, keeping per
+//! cell the smallest (squared distance, surface-cell index) with two passes of 32-bit
+//! `atomicMin` (the order threads run in cannot change the result). Surface-cell order is
+//! point order, so ties go to the smaller point index as on the CPU. The boundary point is
+//! taken in grid units exactly as the CPU sees it (`to_cell` of the world point, rounding
+//! included) and squared distances are summed in the CPU's order without fused multiply-adds,
+//! so exact ties, which Centre boundaries make everywhere, are broken the same way.
+//!
+//! The field stays on the GPU ([`GpuField::field`], one `vec4` per cell, H's RGBA layout) for
+//! the stages that read it there; [`GpuField::to_cpu`] is for writers and tests.
+
+use super::cpu::validate_band;
+use crate::voxel::gpu::GpuBoundary;
+use imprint_core::{BoundaryVariant, DistanceField, Error, Result};
+use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
+use std::sync::Arc;
+
+/// Bytes per cell of the field's buffers: the vec4 field and two u32 minima.
+const BYTES_PER_CELL: u64 = 16 + 4 + 4;
+
+/// A narrow-band distance field on the GPU.
+#[derive(Clone, Debug)]
+pub struct GpuField {
+    pub spec: imprint_core::GridSpec,
+    /// Half-width of the band, in cells.
+    pub band: f32,
+    /// Per cell `vec4<f32>`: xyz = p - x toward the nearest boundary point and w = its distance,
+    /// both in world units; far cells hold (0, 0, 0, band * cell).
+    pub field: wgpu::Buffer,
+    /// Per cell `u32`: the linear index of the surface cell whose point is nearest, or
+    /// [`DistanceField::FAR`]. (Cell indices, not point indices: on the GPU the boundary is
+    /// dense; `to_cpu` converts.)
+    pub nearest_cell: wgpu::Buffer,
+    /// The boundary the field was built from (its buffer is shared, not copied).
+    pub boundary: GpuBoundary,
+}
+
+impl GpuField {
+    /// Far value, world units (as [`DistanceField::far_value`]).
+    pub fn far_value(&self) -> f32 {
+        self.band * self.spec.cell
+    }
+
+    /// Reads the field back as the CPU's [`DistanceField`], `nearest` converted from surface
+    /// cell indices to indices into the compacted boundary points.
+    pub fn to_cpu(&self, ctx: &GpuContext) -> Result<DistanceField> {
+        let boundary = self.boundary.to_cpu(ctx)?;
+        let field: Vec<[f32; 4]> = ctx.read_buffer(&self.field)?;
+        let cells: Vec<u32> = ctx.read_buffer(&self.nearest_cell)?;
+        let n = self.spec.len();
+        let dist = field.iter().take(n).map(|v| v[3]).collect();
+        let nearest = cells
+            .iter()
+            .take(n)
+            .map(|&c| match c {
+                DistanceField::FAR => Ok(DistanceField::FAR),
+                c => boundary
+                    .cells
+                    .binary_search(&c)
+                    .map(|i| i as u32)
+                    .map_err(|_| Error::Gpu(format!("field names cell {c}, which is not a surface cell"))),
+            })
+            .collect::<Result<Vec<u32>>>()?;
+        Ok(DistanceField {
+            spec: self.spec,
+            band: self.band,
+            dist,
+            nearest,
+            points: Arc::new(boundary.points),
+        })
+    }
+}
+
+/// Mirrors `FieldParams` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FieldParams {
+    dims: [u32; 4],
+    origin: [f32; 4],
+    band: f32,
+    band2: f32,
+    far_value: f32,
+    inv_cell: f32,
+    mode: u32,
+    centre: u32,
+    zero: u32,
+    _pad: u32,
+}
+
+/// The narrow-band field of half-width `band` cells around `boundary`, on the GPU. Submitted,
+/// not waited for.
+pub fn build_field_gpu(ctx: &GpuContext, boundary: &GpuBoundary, band: f32) -> Result<GpuField> {
+    build_field_gpu_timed(ctx, boundary, band, None)
+}
+
+/// [`build_field_gpu`], with its passes timed by `timer` (which then submits; call
+/// [`GpuTimer::wait`] for the timings).
+pub fn build_field_gpu_timed(
+    ctx: &GpuContext,
+    boundary: &GpuBoundary,
+    band: f32,
+    mut timer: Option<&mut GpuTimer>,
+) -> Result<GpuField> {
+    validate_band(band)?;
+    let spec = boundary.spec;
+    let dims = spec.dims;
+    ctx.check_grid("GPU distance field", dims.to_array(), BYTES_PER_CELL)?;
+    let n_cells = spec.len() as u32;
+
+    // Grid coordinates of every cell centre as the CPU sees a Centre point:
+    // to_cell(center(c)), per axis (each coordinate depends on its own index only).
+    let axis = |o: f32, n: u32| (0..n).map(move |i| ((o + i as f32 * spec.cell) - o) / spec.cell);
+    let axis_coords: Vec<f32> = axis(spec.origin.x, dims.x)
+        .chain(axis(spec.origin.y, dims.y))
+        .chain(axis(spec.origin.z, dims.z))
+        .collect();
+
+    let axis_buf = ctx.storage_buffer("field axis coordinates", &axis_coords)?;
+    let best_d2 = ctx.zeroed_buffer("field best d2", spec.len() as u64 * 4)?;
+    let nearest_cell = ctx.zeroed_buffer("field nearest cell", spec.len() as u64 * 4)?;
+    let field = ctx.zeroed_buffer("field", spec.len() as u64 * 16)?;
+
+    let sources = [shader!("common/dispatch.wgsl"), shader!("sdf/field.wgsl")];
+    let scatter = ctx.pipeline("field", &sources, "scatter")?;
+    let finish = ctx.pipeline("field", &sources, "finish")?;
+    let params = |mode: u32| FieldParams {
+        dims: [dims.x, dims.y, dims.z, n_cells],
+        origin: spec.origin.extend(spec.cell).to_array(),
+        band,
+        band2: band * band,
+        far_value: band * spec.cell,
+        inv_cell: 1.0 / spec.cell,
+        mode,
+        centre: (boundary.variant == BoundaryVariant::Centre) as u32,
+        zero: 0,
+        _pad: 0,
+    };
+
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("distance field") });
+    ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
+    ctx.fill_u32(&mut encoder, &nearest_cell, u32::MAX)?;
+    for mode in [0, 1] {
+        let p = ctx.uniform_buffer("field params", &params(mode));
+        let bind = ctx.bind_group(
+            "field scatter",
+            &scatter,
+            &[(0, &p), (1, &boundary.points), (2, &best_d2), (3, &nearest_cell), (5, &axis_buf)],
+        );
+        let label = if mode == 0 { "field splat (distance)" } else { "field splat (point)" };
+        let mut pass = compute_pass(&mut encoder, label, timer.as_deref_mut());
+        pass.set_pipeline(&scatter);
+        pass.set_bind_group(0, &bind, &[]);
+        ctx.dispatch_1d(&mut pass, n_cells);
+    }
+    {
+        let p = ctx.uniform_buffer("field params", &params(0));
+        let bind = ctx.bind_group(
+            "field finish",
+            &finish,
+            &[(0, &p), (1, &boundary.points), (2, &best_d2), (3, &nearest_cell), (4, &field)],
+        );
+        let mut pass = compute_pass(&mut encoder, "field finish", timer.as_deref_mut());
+        pass.set_pipeline(&finish);
+        pass.set_bind_group(0, &bind, &[]);
+        ctx.dispatch_1d(&mut pass, n_cells);
+    }
+    match timer {
+        Some(t) => t.submit(ctx, encoder),
+        None => {
+            ctx.queue.submit([encoder.finish()]);
+        }
+    }
+    Ok(GpuField {
+        spec,
+        band,
+        field,
+        nearest_cell,
+        boundary: boundary.clone(),
+    })
+}

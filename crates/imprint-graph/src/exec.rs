@@ -1,0 +1,380 @@
+//! The executor: builds each node's stage once, then runs the plan frame by frame.
+//!
+//! A node computes on a frame only when one of its inputs changed (a static mesh is loaded
+//! once and everything downstream of it reuses its result); writers write every `every`-th
+//! frame. A resource stays where its producer made it: a GPU boundary feeding a GPU field never
+//! comes back to the CPU; only writers and error measurement read fields back.
+
+use crate::plan::Plan;
+use crate::report::{NodeReport, Report};
+use crate::schema::{Backend, GridChoice, Measure, NodeSpec};
+use imprint_core::bvh::Bvh;
+use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, Mesh};
+use imprint_gpu::GpuContext;
+use imprint_render::slice::SliceOptions;
+use imprint_stages::mesh::MeshSource;
+use imprint_stages::sdf::gpu::GpuField;
+use imprint_stages::voxel::cpu::Voxelizer;
+use imprint_stages::voxel::gpu::GpuBoundary;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How to run a plan.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Output folder for writers and `report.json`.
+    pub out: PathBuf,
+    /// Frames to run (default: all the file declares).
+    pub frames: Option<Range<u32>>,
+    /// Overrides the backend of the file and of every node.
+    pub backend: Option<Backend>,
+}
+
+#[derive(Clone)]
+enum Value {
+    Mesh(Arc<Mesh>),
+    Boundary(BoundaryValue),
+    Field(FieldValue),
+}
+
+#[derive(Clone)]
+enum BoundaryValue {
+    Cpu(Arc<Boundary>),
+    Gpu(Arc<GpuBoundary>),
+}
+
+#[derive(Clone)]
+enum FieldValue {
+    Cpu(Arc<DistanceField>),
+    Gpu(Arc<GpuField>),
+}
+
+enum Stage {
+    Mesh(Box<MeshSource>),
+    Voxelize {
+        input: String,
+        spec: GridSpec,
+        variant: BoundaryVariant,
+        gpu: bool,
+        cpu: Option<Voxelizer>,
+    },
+    Field {
+        input: String,
+        band: f32,
+        gpu: bool,
+        measure: Measure,
+        /// The Mesh node behind the boundary: the exact reference for error measurement.
+        mesh_node: String,
+        measured: u32,
+    },
+    WriteField {
+        input: String,
+        dir: PathBuf,
+        npy: bool,
+        slices: Vec<SliceOptions>,
+        every: u32,
+    },
+}
+
+/// Runs `plan`; `progress(done, total)` is called after every frame.
+pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -> crate::Result<Report> {
+    let frames = opts.frames.clone().unwrap_or(0..plan.file.frames);
+    if frames.is_empty() || frames.end > plan.file.frames {
+        return Err(Error::Invalid(format!(
+            "--frames {}..{} is outside the pipeline's 0..{}",
+            frames.start, frames.end, plan.file.frames
+        ))
+        .into());
+    }
+    let start = Instant::now();
+    let mut gpu: Option<&'static GpuContext> = None;
+    let mut stages = build_stages(plan, opts, &mut gpu)?;
+    let mut report = Report {
+        pipeline: plan.source.name.clone(),
+        fps: plan.file.fps,
+        threads: rayon::current_num_threads(),
+        pruned: plan.pruned.clone(),
+        ..Default::default()
+    };
+    for name in &plan.order {
+        let node = &plan.file.nodes[name];
+        let on_gpu = matches!(stages[name], Stage::Voxelize { gpu: true, .. } | Stage::Field { gpu: true, .. });
+        report.nodes.insert(
+            name.clone(),
+            NodeReport {
+                kind: node.kind().to_string(),
+                backend: if on_gpu { "gpu" } else { "cpu" }.to_string(),
+                ..Default::default()
+            },
+        );
+    }
+    report.adapter = gpu.map(|g| g.adapter_name());
+
+    let mut values: BTreeMap<String, Value> = BTreeMap::new();
+    let total = frames.len() as u32;
+    for (done, frame) in frames.clone().enumerate() {
+        let time = frame as f32 / plan.file.fps;
+        let mut changed: BTreeMap<&str, bool> = BTreeMap::new();
+        let mut cpu_fields: BTreeMap<String, Arc<DistanceField>> = BTreeMap::new();
+        for name in &plan.order {
+            let first_run = !values.contains_key(name);
+            let stage = stages.get_mut(name).expect("every planned node has a stage");
+            let nr = report.nodes.get_mut(name).expect("report has every node");
+            let t0 = Instant::now();
+            let did_run = match stage {
+                Stage::Mesh(source) => {
+                    if first_run || !source.is_static() {
+                        let mesh = source.at(time);
+                        if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
+                            return Err(Error::Numerical {
+                                node: name.clone(),
+                                frame,
+                                message: format!("vertex {i} is not finite after the motion"),
+                                hint: "lower the motion's amplitude or degrees".into(),
+                            }
+                            .into());
+                        }
+                        nr.metrics.insert("triangles".into(), mesh.triangles.len().into());
+                        values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
+                        true
+                    } else {
+                        false
+                    }
+                }
+                Stage::Voxelize { input, spec, variant, gpu: on_gpu, cpu } => {
+                    if first_run || changed[input.as_str()] {
+                        let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
+                            unreachable!("edges are typed")
+                        };
+                        let b = if *on_gpu {
+                            let ctx = gpu.expect("GPU chosen at build");
+                            let b = imprint_stages::voxel::gpu::voxelize_gpu(ctx, mesh, spec, *variant)?;
+                            ctx.wait();
+                            BoundaryValue::Gpu(Arc::new(b))
+                        } else {
+                            let vox = cpu.as_mut().expect("CPU voxeliser built");
+                            let b = vox.run(mesh, *variant)?;
+                            nr.metrics.insert("boundary_points".into(), b.len().into());
+                            BoundaryValue::Cpu(Arc::new(b))
+                        };
+                        values.insert(name.clone(), Value::Boundary(b));
+                        true
+                    } else {
+                        false
+                    }
+                }
+                Stage::Field { input, band, gpu: on_gpu, .. } => {
+                    if first_run || changed[input.as_str()] {
+                        let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
+                            unreachable!("edges are typed")
+                        };
+                        let f = if *on_gpu {
+                            let ctx = gpu.expect("GPU chosen at build");
+                            let gb = match b {
+                                BoundaryValue::Gpu(g) => g.clone(),
+                                BoundaryValue::Cpu(c) => Arc::new(GpuBoundary::from_cpu(ctx, c)?),
+                            };
+                            let f = imprint_stages::sdf::gpu::build_field_gpu(ctx, &gb, *band)?;
+                            ctx.wait();
+                            FieldValue::Gpu(Arc::new(f))
+                        } else {
+                            let cb = match b {
+                                BoundaryValue::Cpu(c) => c.clone(),
+                                BoundaryValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
+                            };
+                            FieldValue::Cpu(Arc::new(imprint_stages::sdf::build_field_cpu(&cb, *band)?))
+                        };
+                        values.insert(name.clone(), Value::Field(f));
+                        true
+                    } else {
+                        false
+                    }
+                }
+                Stage::WriteField { .. } => false,
+            };
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            if did_run {
+                nr.record(ms);
+            }
+            changed.insert(name.as_str(), did_run);
+
+            // After the timed part: error measurement and writers.
+            match stages.get_mut(name).expect("stage") {
+                Stage::Field { measure, mesh_node, measured, .. } if did_run || done == 0 => {
+                    let due = match *measure {
+                        Measure::Never => false,
+                        Measure::First => *measured == 0,
+                        Measure::Every(k) => done as u32 % k == 0,
+                    };
+                    let field = cpu_field(name, &values, &mut cpu_fields, gpu)?;
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    nr.metrics.insert("band_cells".into(), field.band_cells().into());
+                    nr.metrics.insert("boundary_points".into(), field.points.len().into());
+                    if due {
+                        let t = Instant::now();
+                        let Some(Value::Mesh(mesh)) = values.get(mesh_node.as_str()) else {
+                            unreachable!("the mesh node ran before the field")
+                        };
+                        let err = imprint_stages::metrics::field_error_with(&field, &Bvh::new(mesh));
+                        nr.measure_ms += t.elapsed().as_secs_f64() * 1e3;
+                        *measured += 1;
+                        let worst = nr.metrics.get("error_max_cells").and_then(|v| v.as_f64()).unwrap_or(0.0);
+                        nr.metrics.insert("error_frame".into(), frame.into());
+                        nr.metrics.insert("error_cells".into(), serde_json::to_value(err).expect("plain data"));
+                        nr.metrics.insert("error_max_cells".into(), worst.max(err.max as f64).into());
+                        nr.metrics.insert("frames_measured".into(), (*measured).into());
+                        if !(err.max.is_finite()) {
+                            return Err(Error::Numerical {
+                                node: name.clone(),
+                                frame,
+                                message: "the field's error against the exact distance is not finite".into(),
+                                hint: "check the mesh for huge coordinates; lower the resolution".into(),
+                            }
+                            .into());
+                        }
+                    }
+                }
+                Stage::WriteField { input, dir, npy, slices, every } => {
+                    if done as u32 % *every == 0 {
+                        let t = Instant::now();
+                        let field = cpu_field(input, &values, &mut cpu_fields, gpu)?;
+                        let mut n = 0;
+                        if *npy {
+                            n += imprint_render::field_io::write_field(dir, input, frame, &field)?.len();
+                        }
+                        for s in slices.iter() {
+                            imprint_render::slice::write_field_slice_for_frame(dir, input, frame, &field, s)?;
+                            n += 1;
+                        }
+                        report.files_written += n;
+                        let nr = report.nodes.get_mut(name).expect("report");
+                        nr.record(t.elapsed().as_secs_f64() * 1e3);
+                        nr.metrics.insert("dir".into(), dir.display().to_string().into());
+                        let files = nr.metrics.get("files").and_then(|v| v.as_u64()).unwrap_or(0);
+                        nr.metrics.insert("files".into(), (files + n as u64).into());
+                    }
+                }
+                _ => {}
+            }
+        }
+        report.frames.push(frame);
+        progress(done as u32 + 1, total);
+    }
+    report.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+    let json = serde_json::to_string_pretty(&report).expect("report is plain data");
+    imprint_core::io::atomic_write_bytes(&opts.out.join("report.json"), json.as_bytes())?;
+    Ok(report)
+}
+
+/// The CPU copy of a field node's value this frame (read back once per frame if on the GPU).
+fn cpu_field(
+    name: &str,
+    values: &BTreeMap<String, Value>,
+    cache: &mut BTreeMap<String, Arc<DistanceField>>,
+    gpu: Option<&'static GpuContext>,
+) -> crate::Result<Arc<DistanceField>> {
+    if let Some(f) = cache.get(name) {
+        return Ok(f.clone());
+    }
+    let Some(Value::Field(f)) = values.get(name) else {
+        unreachable!("edges are typed")
+    };
+    let f = match f {
+        FieldValue::Cpu(f) => f.clone(),
+        FieldValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
+    };
+    cache.insert(name.to_string(), f.clone());
+    Ok(f)
+}
+
+/// Which backend a node with two paths runs on.
+fn choose_gpu(
+    want: Backend,
+    node: &str,
+    gpu: &mut Option<&'static GpuContext>,
+) -> crate::Result<bool> {
+    match want {
+        Backend::Cpu => Ok(false),
+        Backend::Gpu => {
+            let ctx = GpuContext::shared().map_err(|e| {
+                Error::Gpu(format!("node '{node}' asks for backend Gpu, but {e}"))
+            })?;
+            *gpu = Some(ctx);
+            Ok(true)
+        }
+        Backend::Auto => match GpuContext::shared() {
+            Ok(ctx) if !ctx.is_software() => {
+                *gpu = Some(ctx);
+                Ok(true)
+            }
+            _ => Ok(false),
+        },
+    }
+}
+
+fn build_stages(
+    plan: &Plan,
+    opts: &RunOptions,
+    gpu: &mut Option<&'static GpuContext>,
+) -> crate::Result<BTreeMap<String, Stage>> {
+    let mut stages = BTreeMap::new();
+    let mut rest_bounds = BTreeMap::new();
+    for name in &plan.order {
+        let node = &plan.file.nodes[name];
+        let want = opts.backend.or(node.backend()).unwrap_or(plan.file.backend);
+        let stage = match node {
+            NodeSpec::Mesh(p) => {
+                let src = MeshSource::new(p, &plan.base_dir)?;
+                rest_bounds.insert(name.clone(), src.at(0.0).bounds());
+                Stage::Mesh(Box::new(src))
+            }
+            NodeSpec::Voxelize(v) => {
+                let spec = match v.grid {
+                    GridChoice::Fit { resolution, padding } => {
+                        GridSpec::fit(&rest_bounds[&v.mesh], resolution, padding)?
+                    }
+                    GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
+                        glam::Vec3::new(origin.0, origin.1, origin.2),
+                        cell,
+                        glam::UVec3::new(dims.0, dims.1, dims.2),
+                    )?,
+                };
+                // Scratch, field and the writers' copies: refuse now rather than fail later.
+                spec.check_memory(&format!("node '{name}': voxelisation and distance field"), 9 + 8 + 16)?;
+                let on_gpu = choose_gpu(want, name, gpu)?;
+                Stage::Voxelize {
+                    input: v.mesh.clone(),
+                    spec,
+                    variant: v.variant,
+                    gpu: on_gpu,
+                    cpu: if on_gpu { None } else { Some(Voxelizer::new(spec)?) },
+                }
+            }
+            NodeSpec::DistanceField(f) => {
+                let NodeSpec::Voxelize(v) = &plan.file.nodes[&f.boundary] else {
+                    unreachable!("edges are typed")
+                };
+                Stage::Field {
+                    input: f.boundary.clone(),
+                    band: f.band,
+                    gpu: choose_gpu(want, name, gpu)?,
+                    measure: f.measure,
+                    mesh_node: v.mesh.clone(),
+                    measured: 0,
+                }
+            }
+            NodeSpec::WriteField(w) => Stage::WriteField {
+                input: w.field.clone(),
+                dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),
+                npy: w.npy,
+                slices: w.slices.clone(),
+                every: w.every,
+            },
+        };
+        stages.insert(name.clone(), stage);
+    }
+    Ok(stages)
+}

@@ -1,0 +1,77 @@
+//! Per-node timing and metrics, collected every frame and written as `report.json`.
+
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct NodeReport {
+    pub kind: String,
+    /// "cpu" or "gpu".
+    pub backend: String,
+    /// Frames on which the node computed (a node whose inputs did not change is not re-run).
+    pub runs: u32,
+    pub total_ms: f64,
+    pub mean_ms: f64,
+    pub max_ms: f64,
+    /// Time spent measuring error against the exact reference (not part of the stage's time).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub measure_ms: f64,
+    /// The stage's own figures (boundary points, band cells, error in cells, files written…).
+    pub metrics: BTreeMap<String, serde_json::Value>,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+impl NodeReport {
+    pub fn record(&mut self, ms: f64) {
+        self.runs += 1;
+        self.total_ms += ms;
+        self.max_ms = self.max_ms.max(ms);
+        self.mean_ms = self.total_ms / self.runs as f64;
+    }
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Report {
+    pub pipeline: String,
+    pub frames: Vec<u32>,
+    pub fps: f32,
+    /// The GPU adapter used, if any node ran on the GPU.
+    pub adapter: Option<String>,
+    pub threads: usize,
+    pub wall_ms: f64,
+    pub nodes: BTreeMap<String, NodeReport>,
+    pub pruned: Vec<(String, String)>,
+    pub files_written: usize,
+}
+
+impl Report {
+    /// The per-node timing table printed at the end of a run.
+    pub fn table(&self, order: &[String]) -> String {
+        let mut s = format!(
+            "{:<16} {:<14} {:>4} {:>6} {:>10} {:>10} {:>10}\n",
+            "node", "kind", "on", "runs", "total ms", "mean ms", "max ms"
+        );
+        for name in order {
+            if let Some(n) = self.nodes.get(name) {
+                s += &format!(
+                    "{:<16} {:<14} {:>4} {:>6} {:>10.1} {:>10.2} {:>10.2}\n",
+                    name, n.kind, n.backend, n.runs, n.total_ms, n.mean_ms, n.max_ms
+                );
+            }
+        }
+        for (name, why) in &self.pruned {
+            s += &format!("{name:<16} pruned: {why}\n");
+        }
+        s += &format!(
+            "{} frame(s) in {:.1} ms ({} threads){}",
+            self.frames.len(),
+            self.wall_ms,
+            self.threads,
+            self.adapter.as_ref().map_or(String::new(), |a| format!(", GPU: {a}"))
+        );
+        s
+    }
+}

@@ -1,0 +1,205 @@
+//! The pipeline file as users write it (RON). Every struct rejects unknown fields, so a typo
+//! is an error with its position rather than a silently ignored setting.
+
+use imprint_core::BoundaryVariant;
+use imprint_render::slice::SliceOptions;
+use imprint_stages::mesh::MeshParams;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineFile {
+    /// Number of frames to run.
+    pub frames: u32,
+    /// Frames per second: frame f is at time f / fps seconds.
+    #[serde(default = "default_fps")]
+    pub fps: f32,
+    #[serde(default)]
+    pub backend: Backend,
+    /// Seed for every stochastic stage (none yet in this version; kept for reproducibility).
+    #[serde(default)]
+    pub seed: u64,
+    /// Nodes by name; each names its inputs by node name.
+    pub nodes: BTreeMap<String, NodeSpec>,
+}
+
+fn default_fps() -> f32 {
+    30.0
+}
+
+/// Where a node runs. `Auto` takes a hardware GPU when there is one, the CPU otherwise (a
+/// software Vulkan adapter is never picked by `Auto`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+pub enum Backend {
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum NodeSpec {
+    /// A mesh from an OBJ file or a primitive, fitted and moved (output: Mesh).
+    Mesh(MeshParams),
+    /// Surface voxelisation into a discrete boundary (input: Mesh; output: Boundary).
+    Voxelize(VoxelizeNode),
+    /// Narrow-band distance field (input: Boundary; output: DistanceField).
+    DistanceField(FieldNode),
+    /// Writes a field per frame as .npy + JSON and PNG slices (input: DistanceField; a writer).
+    WriteField(WriteFieldNode),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct VoxelizeNode {
+    /// The Mesh node to voxelise.
+    pub mesh: String,
+    pub grid: GridChoice,
+    /// `Closest` (sub-voxel, default) or `Centre` (H's voxel centres).
+    #[serde(default)]
+    pub variant: BoundaryVariant,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+}
+
+/// The grid a Voxelize node works on.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum GridChoice {
+    /// Cubic cells, `resolution` along the longest side of the mesh's box at time 0 grown by
+    /// `padding` (a fraction of that side) on every side. The grid stays fixed over the run,
+    /// so padding must cover the motion.
+    Fit {
+        resolution: u32,
+        #[serde(default = "default_padding")]
+        padding: f32,
+    },
+    /// An explicit grid: `origin` is the centre of cell (0, 0, 0).
+    Explicit {
+        origin: (f32, f32, f32),
+        cell: f32,
+        dims: (u32, u32, u32),
+    },
+}
+
+fn default_padding() -> f32 {
+    0.1
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldNode {
+    /// The Voxelize node whose boundary the field is built from.
+    pub boundary: String,
+    /// Half-width of the band, in cells (H's `a`).
+    #[serde(default = "default_band")]
+    pub band: f32,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+    /// On which frames the error against the exact distance is measured (costly: one exact
+    /// closest-point query per band cell).
+    #[serde(default)]
+    pub measure: Measure,
+}
+
+fn default_band() -> f32 {
+    3.0
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+pub enum Measure {
+    Never,
+    /// The first frame run.
+    #[default]
+    First,
+    /// Every k-th frame run, starting with the first.
+    Every(u32),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WriteFieldNode {
+    /// The DistanceField node to write.
+    pub field: String,
+    /// Folder under the run's output folder (default: the node's name).
+    #[serde(default)]
+    pub dir: Option<String>,
+    /// Write `<name>_<frame>_dist.npy`, `_vec.npy` and `_field.json`.
+    #[serde(default = "yes")]
+    pub npy: bool,
+    /// PNG slices per frame.
+    #[serde(default)]
+    pub slices: Vec<SliceOptions>,
+    /// Write every k-th frame (1 = every frame).
+    #[serde(default = "one")]
+    pub every: u32,
+}
+
+fn yes() -> bool {
+    true
+}
+fn one() -> u32 {
+    1
+}
+
+/// The resource types that flow along edges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PortType {
+    Mesh,
+    Boundary,
+    DistanceField,
+}
+
+impl std::fmt::Display for PortType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            PortType::Mesh => "Mesh",
+            PortType::Boundary => "Boundary",
+            PortType::DistanceField => "DistanceField",
+        })
+    }
+}
+
+impl NodeSpec {
+    pub fn kind(&self) -> &'static str {
+        match self {
+            NodeSpec::Mesh(_) => "Mesh",
+            NodeSpec::Voxelize(_) => "Voxelize",
+            NodeSpec::DistanceField(_) => "DistanceField",
+            NodeSpec::WriteField(_) => "WriteField",
+        }
+    }
+
+    /// Typed input ports: (port name, node named, type expected).
+    pub fn inputs(&self) -> Vec<(&'static str, &str, PortType)> {
+        match self {
+            NodeSpec::Mesh(_) => vec![],
+            NodeSpec::Voxelize(v) => vec![("mesh", &v.mesh, PortType::Mesh)],
+            NodeSpec::DistanceField(f) => vec![("boundary", &f.boundary, PortType::Boundary)],
+            NodeSpec::WriteField(w) => vec![("field", &w.field, PortType::DistanceField)],
+        }
+    }
+
+    /// The type of the node's output, or None for writers.
+    pub fn output(&self) -> Option<PortType> {
+        match self {
+            NodeSpec::Mesh(_) => Some(PortType::Mesh),
+            NodeSpec::Voxelize(_) => Some(PortType::Boundary),
+            NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
+            NodeSpec::WriteField(_) => None,
+        }
+    }
+
+    pub fn is_writer(&self) -> bool {
+        self.output().is_none()
+    }
+
+    /// The per-node backend override, for nodes that have two paths.
+    pub fn backend(&self) -> Option<Backend> {
+        match self {
+            NodeSpec::Voxelize(v) => v.backend,
+            NodeSpec::DistanceField(f) => f.backend,
+            _ => None,
+        }
+    }
+}

@@ -1,0 +1,128 @@
+// Geometric kernels, ported operation for operation from imprint_core::geom so that the GPU
+// makes the same decisions as the CPU reference (dot products are written out in glam's order:
+// x, then y, then z).
+
+fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// glam's operand order (WGSL's cross() leaves it to the implementation).
+fn cross3(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+
+fn closest_on_segment(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    let ab = b - a;
+    let l2 = dot3(ab, ab);
+    if l2 <= 0.0 {
+        return a;
+    }
+    return a + ab * clamp(dot3(p - a, ab) / l2, 0.0, 1.0);
+}
+
+// Collinear vertices not caught by the Voronoi regions: the closest of the three edges.
+fn closest_on_degenerate(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
+    var best = closest_on_segment(p, a, b);
+    let q1 = closest_on_segment(p, b, c);
+    let q2 = closest_on_segment(p, c, a);
+    let d_best = best - p;
+    let d1 = q1 - p;
+    var best_d2 = dot3(d_best, d_best);
+    if dot3(d1, d1) < best_d2 {
+        best = q1;
+        best_d2 = dot3(d1, d1);
+    }
+    let d2 = q2 - p;
+    if dot3(d2, d2) < best_d2 {
+        best = q2;
+    }
+    return best;
+}
+
+// The point of triangle (a, b, c) closest to p (Ericson, Real-Time Collision Detection §5.1.5),
+// with the degenerate-triangle fallback of the CPU version.
+fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = dot3(ab, ap);
+    let d2 = dot3(ac, ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let d3 = dot3(ab, bp);
+    let d4 = dot3(ac, bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return a + v * ab;
+    }
+    let cp = p - c;
+    let d5 = dot3(ab, cp);
+    let d6 = dot3(ac, cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return a + w * ac;
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return b + w * (c - b);
+    }
+    let denom = va + vb + vc;
+    // f32::MIN_POSITIVE; `!(x <= MAX)` also catches inf and NaN.
+    if abs(denom) <= 1.17549435e-38 || !(abs(denom) <= 3.40282347e38) {
+        return closest_on_degenerate(p, a, b, c);
+    }
+    let inv = 1.0 / denom;
+    let v = vb * inv;
+    let w = vc * inv;
+    return a + ab * v + ac * w;
+}
+
+// Does triangle (a, b, c) touch the closed box center ± half? Akenine-Möller's separating-axis
+// test: the 3 box axes, the 9 edge cross products, the triangle plane.
+fn sat_axis(axis: vec3<f32>, v0: vec3<f32>, v1: vec3<f32>, v2: vec3<f32>, half: vec3<f32>) -> bool {
+    let p0 = dot3(axis, v0);
+    let p1 = dot3(axis, v1);
+    let p2 = dot3(axis, v2);
+    let r = half.x * abs(axis.x) + half.y * abs(axis.y) + half.z * abs(axis.z);
+    let lo = min(min(p0, p1), p2);
+    let hi = max(max(p0, p1), p2);
+    return !(lo > r || hi < -r);
+}
+
+fn sat_edge(e: vec3<f32>, v0: vec3<f32>, v1: vec3<f32>, v2: vec3<f32>, half: vec3<f32>) -> bool {
+    return sat_axis(vec3<f32>(0.0, -e.z, e.y), v0, v1, v2, half)
+        && sat_axis(vec3<f32>(e.z, 0.0, -e.x), v0, v1, v2, half)
+        && sat_axis(vec3<f32>(-e.y, e.x, 0.0), v0, v1, v2, half);
+}
+
+fn triangle_box_overlap(center: vec3<f32>, half: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> bool {
+    let v0 = a - center;
+    let v1 = b - center;
+    let v2 = c - center;
+    let mn = min(min(v0, v1), v2);
+    let mx = max(max(v0, v1), v2);
+    if any(mn > half) || any(mx < -half) {
+        return false;
+    }
+    let e0 = v1 - v0;
+    let e1 = v2 - v1;
+    let e2 = v0 - v2;
+    if !(sat_edge(e0, v0, v1, v2, half) && sat_edge(e1, v0, v1, v2, half) && sat_edge(e2, v0, v1, v2, half)) {
+        return false;
+    }
+    let n = cross3(e0, e1);
+    let r = half.x * abs(n.x) + half.y * abs(n.y) + half.z * abs(n.z);
+    let s = dot3(n, v0);
+    return abs(s) <= r;
+}

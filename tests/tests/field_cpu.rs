@@ -1,0 +1,258 @@
+//! The CPU voxeliser and distance field against exact answers: analytic planes and spheres,
+//! the exact closest point on the triangles, and the cases real meshes bring (open, flipped,
+//! duplicated, unwelded, degenerate, on grid planes, bigger than the grid, empty).
+
+use glam::{UVec3, Vec3};
+use imprint_core::mesh::primitives;
+use imprint_core::{Aabb, BoundaryVariant, DistanceField, GridSpec, Mesh, Sampling};
+use imprint_stages::metrics::field_error;
+use imprint_stages::sdf::build_field_cpu;
+use imprint_stages::voxel::voxelize_cpu;
+use imprint_tests::mesh;
+
+fn field(m: &Mesh, spec: &GridSpec, variant: BoundaryVariant, band: f32) -> DistanceField {
+    let b = voxelize_cpu(m, spec, variant).unwrap();
+    build_field_cpu(&b, band).unwrap()
+}
+
+/// A tilted plane (not aligned with the grid) through the grid's middle.
+fn tilted_plane() -> (Mesh, Vec3, Vec3) {
+    let n = Vec3::new(0.3, 0.2, 1.0).normalize();
+    let p0 = Vec3::new(0.51, 0.47, 0.503);
+    let mut m = primitives::plane(4.0, 1);
+    // plane() lies in x-z facing +y: rotate +y onto n, move through p0.
+    let rot = glam::Quat::from_rotation_arc(Vec3::Y, n);
+    m.transform(glam::Mat4::from_rotation_translation(rot, p0));
+    (m, n, p0)
+}
+
+#[test]
+fn plane_distance_is_exact_with_closest_points() {
+    let (m, n, p0) = tilted_plane();
+    let spec = GridSpec::new(Vec3::splat(0.0), 1.0 / 32.0, UVec3::splat(33)).unwrap();
+    let f = field(&m, &spec, BoundaryVariant::Closest, 3.0);
+    let mut checked = 0;
+    for i in 0..spec.len() {
+        let x = spec.center(spec.coords(i));
+        let exact = (x - p0).dot(n).abs() / spec.cell;
+        if exact <= 2.9 {
+            assert!(!f.is_far(i), "cell {i} at {exact} cells left far");
+            let got = f.dist[i] / spec.cell;
+            assert!((got - exact).abs() < 2e-4, "cell {i}: {got} vs exact {exact}");
+            // The vector points to the plane along -n or +n with the same length.
+            let v = f.vector(i) / spec.cell;
+            assert!((v.length() - exact).abs() < 2e-4);
+            checked += 1;
+        }
+        if exact > 3.01 {
+            assert!(f.is_far(i), "cell {i} at {exact} cells is in the band");
+            assert_eq!(f.dist[i], f.far_value());
+        }
+    }
+    assert!(checked > 5000, "{checked}");
+    // Sampling "A" (vectors) is exact on a plane between cells; "B" (distances) is not
+    // exact only near the surface where |d| has a kink.
+    let p = p0 + n * 1.37 * spec.cell + Vec3::new(0.013, -0.007, 0.0);
+    let exact = (p - p0).dot(n).abs();
+    let a = f.sample(p, Sampling::Vector);
+    assert!(a.in_band && (a.distance - exact).abs() < 1e-4 * spec.cell, "{a:?} vs {exact}");
+}
+
+#[test]
+fn centre_variant_is_accurate_to_a_cell_only() {
+    let (m, n, p0) = tilted_plane();
+    let spec = GridSpec::new(Vec3::ZERO, 1.0 / 32.0, UVec3::splat(33)).unwrap();
+    let f = field(&m, &spec, BoundaryVariant::Centre, 3.0);
+    let mut worst: f32 = 0.0;
+    for i in 0..spec.len() {
+        let exact = (spec.center(spec.coords(i)) - p0).dot(n).abs() / spec.cell;
+        if exact <= 2.0 && !f.is_far(i) {
+            worst = worst.max((f.dist[i] / spec.cell - exact).abs());
+        }
+    }
+    // H's points sit on cell centres: errors approach half a cell but no more than sqrt(3)/2.
+    assert!(worst > 0.2 && worst <= 0.87, "{worst}");
+}
+
+#[test]
+fn sphere_field_matches_analytic_distance() {
+    let r = 0.7;
+    let m = primitives::uv_sphere(r, 256, 128);
+    let spec = GridSpec::fit(&m.bounds(), 48, 0.1).unwrap();
+    let f = field(&m, &spec, BoundaryVariant::Closest, 3.0);
+    // Facets sag below the analytic sphere by at most r(1 - cos(pi/128)) ~ 2e-4 r.
+    let sag = r * (1.0 - (std::f32::consts::PI / 128.0).cos());
+    let mut n = 0;
+    for i in 0..spec.len() {
+        if f.is_far(i) {
+            continue;
+        }
+        let x = spec.center(spec.coords(i));
+        let exact = (x.length() - r).abs();
+        let err = (f.dist[i] - exact).abs() / spec.cell;
+        assert!(err < 0.12 + sag / spec.cell, "cell {i}: err {err} cells");
+        n += 1;
+    }
+    assert!(n > 10_000);
+    let e = field_error(&f, &m);
+    assert_eq!(e.far_fraction, 0.0);
+    assert!(e.p99 < 0.1 && e.max < 0.3, "{e:?}");
+}
+
+#[test]
+fn open_meshes_meet_the_accuracy_goal() {
+    for name in ["teapot", "suzanne"] {
+        let m = mesh(name);
+        let spec = GridSpec::fit(&m.bounds(), 64, 0.1).unwrap();
+        let f = field(&m, &spec, BoundaryVariant::Closest, 3.0);
+        let e = field_error(&f, &m);
+        assert!(e.band_cells > 1000, "{name}: {e:?}");
+        assert!(e.far_fraction < 1e-3, "{name}: {e:?}");
+        assert!(e.p99 <= 0.1 && e.max <= 0.3, "{name}: {e:?}");
+    }
+}
+
+/// Field equality up to rounding: same band, distances within `tol` cells.
+fn assert_same_field(a: &DistanceField, b: &DistanceField, tol: f32, what: &str) {
+    assert_eq!(a.spec, b.spec);
+    let mut band_diff = 0;
+    for i in 0..a.dist.len() {
+        if a.is_far(i) != b.is_far(i) {
+            // Only cells right at the band edge may differ by rounding.
+            let d = a.dist[i].min(b.dist[i]) / a.spec.cell;
+            assert!((d - a.band).abs() < 1e-3, "{what}: cell {i} band differs at {d} cells");
+            band_diff += 1;
+            continue;
+        }
+        let e = (a.dist[i] - b.dist[i]).abs() / a.spec.cell;
+        assert!(e <= tol, "{what}: cell {i} differs by {e} cells");
+    }
+    assert!(band_diff < 10, "{what}: {band_diff} band-edge cells differ");
+}
+
+#[test]
+fn flipped_duplicated_and_unwelded_triangles_give_the_same_field() {
+    let m = mesh("teapot");
+    let spec = GridSpec::fit(&m.bounds(), 40, 0.1).unwrap();
+    let base = field(&m, &spec, BoundaryVariant::Closest, 2.5);
+
+    let mut flipped = m.clone();
+    for t in flipped.triangles.iter_mut().step_by(2) {
+        t.swap(1, 2);
+    }
+    assert_same_field(&base, &field(&flipped, &spec, BoundaryVariant::Closest, 2.5), 1e-5, "flipped");
+
+    let mut doubled = m.clone();
+    let tris = doubled.triangles.clone();
+    doubled.triangles.extend(tris);
+    let d = field(&doubled, &spec, BoundaryVariant::Closest, 2.5);
+    assert_eq!(d.dist, base.dist, "duplicated triangles change nothing");
+
+    let mut soup = Mesh::default();
+    for t in 0..m.triangles.len() {
+        let [a, b, c] = m.triangle(t);
+        let k = soup.positions.len() as u32;
+        soup.positions.extend([a, b, c]);
+        soup.triangles.push([k, k + 1, k + 2]);
+    }
+    let s = field(&soup, &spec, BoundaryVariant::Closest, 2.5);
+    assert_eq!(s.dist, base.dist, "unwelded soup");
+    assert_eq!(s.nearest, base.nearest);
+}
+
+#[test]
+fn degenerate_triangles_are_harmless() {
+    let m = primitives::uv_sphere(0.5, 48, 24);
+    let spec = GridSpec::fit(&m.bounds(), 32, 0.1).unwrap();
+    let base = field(&m, &spec, BoundaryVariant::Closest, 3.0);
+    let mut d = m.clone();
+    // Zero-area triangles made of surface vertices: repeated vertices and collinear ones.
+    for t in 0..200u32 {
+        let [a, b, _] = m.triangles[t as usize];
+        d.triangles.push([a, a, a]);
+        d.triangles.push([a, b, a]);
+        d.triangles.push([b, a, b]);
+    }
+    let f = field(&d, &spec, BoundaryVariant::Closest, 3.0);
+    // They lie on the surface (vertices and edges), so the field does not get worse.
+    let e = field_error(&f, &m);
+    let e0 = field_error(&base, &m);
+    assert!(e.max <= e0.max + 1e-5 && e.p99 <= e0.p99 + 1e-5, "{e:?} vs {e0:?}");
+}
+
+#[test]
+fn triangles_on_grid_planes_leave_no_gaps() {
+    // A box whose faces lie exactly on cell faces (x = 2.5, 10.5 …) and on cell centres.
+    let spec = GridSpec::new(Vec3::ZERO, 1.0, UVec3::splat(16)).unwrap();
+    for (lo, hi) in [(Vec3::splat(2.5), Vec3::splat(10.5)), (Vec3::splat(3.0), Vec3::splat(11.0))] {
+        let half = (hi - lo) / 2.0;
+        let mut m = primitives::cuboid(half, 3);
+        m.transform(glam::Mat4::from_translation((lo + hi) / 2.0));
+        let b = voxelize_cpu(&m, &spec, BoundaryVariant::Closest).unwrap();
+        // Exactly the cells whose closed box touches the box's surface.
+        let touches = |c: UVec3| {
+            let x = c.as_vec3();
+            let cell = Aabb { min: x - 0.5, max: x + 0.5 };
+            let inter_min = cell.min.max(lo);
+            let inter_max = cell.max.min(hi);
+            let overlaps = inter_min.cmple(inter_max).all();
+            let inside_strictly = cell.min.cmpgt(lo).all() && cell.max.cmplt(hi).all();
+            overlaps && !inside_strictly
+        };
+        let expected: Vec<u32> = (0..spec.len())
+            .filter(|&i| touches(spec.coords(i)))
+            .map(|i| i as u32)
+            .collect();
+        assert_eq!(b.cells, expected, "box {lo}..{hi}");
+        // Every boundary point lies on the box surface.
+        for p in &b.points {
+            let d = (p - lo).min(hi - p).abs().min_element();
+            assert!(d < 1e-5, "{p}");
+        }
+    }
+}
+
+#[test]
+fn mesh_bigger_than_the_grid_is_clipped() {
+    let m = primitives::uv_sphere(3.0, 64, 32);
+    let spec = GridSpec::new(Vec3::new(2.5, -0.5, -0.5), 0.05, UVec3::splat(20)).unwrap();
+    let f = field(&m, &spec, BoundaryVariant::Closest, 3.0);
+    assert!(f.band_cells() > 0);
+    assert!(f.points.iter().all(|p| p.is_finite()));
+}
+
+#[test]
+fn empty_mesh_is_a_clear_error() {
+    let e = Mesh::new(vec![Vec3::ZERO], vec![], "empty.obj").unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(e.to_string().contains("no triangles"), "{e}");
+}
+
+#[test]
+fn thread_count_does_not_change_a_byte() {
+    let m = mesh("suzanne");
+    let spec = GridSpec::fit(&m.bounds(), 48, 0.1).unwrap();
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| field(&m, &spec, BoundaryVariant::Closest, 3.0))
+    };
+    let one = run(1);
+    let three = run(3);
+    assert_eq!(one.dist, three.dist);
+    assert_eq!(one.nearest, three.nearest);
+    assert_eq!(*one.points, *three.points);
+}
+
+#[test]
+fn boundary_points_scale_with_area_not_triangle_count() {
+    // H's headline: the same shape at 10x the triangles gives nearly the same boundary.
+    let coarse = primitives::uv_sphere(0.5, 64, 32);
+    let fine = primitives::uv_sphere(0.5, 256, 128);
+    let spec = GridSpec::fit(&coarse.bounds(), 64, 0.1).unwrap();
+    let a = voxelize_cpu(&coarse, &spec, BoundaryVariant::Closest).unwrap().len() as f32;
+    let b = voxelize_cpu(&fine, &spec, BoundaryVariant::Closest).unwrap().len() as f32;
+    assert!((a - b).abs() / b < 0.02, "{a} vs {b}");
+}
