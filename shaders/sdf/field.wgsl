@@ -9,8 +9,10 @@
 //                   of s, so ties go to the smaller surface-cell index = smaller point index;
 //   finish          (per cell): distance and closest-point vector in world units.
 // Modes 0 and 1 are one entry point so both compute the distance with the same code.
-// Splatting costs (surface cells) x (2a+1)^3 atomics instead of (all cells) x (2a+2)^3 reads
-// for a gather, and the boundary is a thin shell, so it is the cheaper side.
+// Splatting costs (surface cells) x (2a+1)^3 distance tests instead of (all cells) x (2a+2)^3
+// reads for a gather, and the boundary is a thin shell, so it is the cheaper side. The splat
+// runs one thread per surface cell from a compacted list (`compact`, then an indirect dispatch
+// sized on the GPU by `size_dispatch`), so nothing waits for the CPU.
 
 struct FieldParams {
     // xyz: grid cells per axis; w: number of cells.
@@ -29,7 +31,8 @@ struct FieldParams {
     centre: u32,
     // Always 0; see `rnd`.
     zero: u32,
-    _pad: u32,
+    // The device's max_compute_workgroups_per_dimension (for the indirect dispatch).
+    max_groups: u32,
 }
 
 const FAR: u32 = 0xffffffffu;
@@ -44,6 +47,11 @@ const FAR: u32 = 0xffffffffu;
 @group(0) @binding(4) var<storage, read_write> field: array<vec4<f32>>;
 // to_cell(center(i)) along x (nx values), then y, then z, computed on the CPU.
 @group(0) @binding(5) var<storage, read> axis_coords: array<f32>;
+// The surface cells, in no particular order (the minima do not depend on it), and their count.
+@group(0) @binding(6) var<storage, read_write> surface: array<u32>;
+@group(0) @binding(7) var<storage, read_write> surface_count: atomic<u32>;
+// Indirect dispatch arguments (x, y, z workgroups) for one thread per surface cell.
+@group(0) @binding(8) var<storage, read_write> dispatch_args: array<u32, 3>;
 
 // The value of x, rounded on its own: an unknowable (to the compiler) no-op that keeps
 // `a * b + c` from being fused into one fma, which would round differently from the CPU and
@@ -81,16 +89,34 @@ fn boundary_point(s: u32, q: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(div_cell(v.x), div_cell(v.y), div_cell(v.z));
 }
 
+// Lists the surface cells, so that the splat runs one thread per point with every SIMD lane
+// busy instead of one per cell with most lanes idle.
+@compute @workgroup_size(64)
+fn compact(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let idx = thread_index(gid, nwg);
+    if idx < params.dims.w && points[idx].w != 0.0 {
+        surface[atomicAdd(&surface_count, 1u)] = idx;
+    }
+}
+
+// Workgroups for the splat, folded into x and y like GpuContext::dispatch_1d.
+@compute @workgroup_size(1)
+fn size_dispatch() {
+    let groups = max((atomicLoad(&surface_count) + WORKGROUP_SIZE - 1u) / WORKGROUP_SIZE, 1u);
+    let x = min(groups, params.max_groups);
+    dispatch_args[0] = x;
+    dispatch_args[1] = (groups + x - 1u) / x;
+    dispatch_args[2] = 1u;
+}
+
 @compute @workgroup_size(64)
 fn scatter(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let s = thread_index(gid, nwg);
-    if s >= params.dims.w {
+    let t = thread_index(gid, nwg);
+    if t >= atomicLoad(&surface_count) {
         return;
     }
+    let s = surface[t];
     let point = points[s];
-    if point.w == 0.0 {
-        return;
-    }
     let p = boundary_point(s, point.xyz);
     let top = vec3<f32>(params.dims.xyz) - 1.0;
     // Cells whose every coordinate is within `band` of p (a hair wider: the d2 test decides).
@@ -118,9 +144,13 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
                 }
                 let idx = i + nx * (j + ny * k);
                 let bits = bitcast<u32>(d2);
+                // A plain look first: most candidates lose, and atomics are the expensive part.
+                let current = atomicLoad(&best_d2[idx]);
                 if params.mode == 0u {
-                    atomicMin(&best_d2[idx], bits);
-                } else if atomicLoad(&best_d2[idx]) == bits {
+                    if bits < current {
+                        atomicMin(&best_d2[idx], bits);
+                    }
+                } else if current == bits {
                     atomicMin(&nearest[idx], s);
                 }
             }

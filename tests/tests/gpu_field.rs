@@ -28,8 +28,16 @@ fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
     assert_eq!(cpu.spec, gpu.spec);
     assert_eq!(cpu.variant, gpu.variant);
     if cpu.cells != gpu.cells {
-        let only_cpu: Vec<_> = cpu.cells.iter().filter(|c| gpu.cells.binary_search(c).is_err()).collect();
-        let only_gpu: Vec<_> = gpu.cells.iter().filter(|c| cpu.cells.binary_search(c).is_err()).collect();
+        let only_cpu: Vec<_> = cpu
+            .cells
+            .iter()
+            .filter(|c| gpu.cells.binary_search(c).is_err())
+            .collect();
+        let only_gpu: Vec<_> = gpu
+            .cells
+            .iter()
+            .filter(|c| cpu.cells.binary_search(c).is_err())
+            .collect();
         panic!(
             "{name}: surface cells differ ({} CPU, {} GPU); only CPU: {:?}; only GPU: {:?}",
             cpu.len(),
@@ -45,14 +53,20 @@ fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
         .zip(&gpu.points)
         .map(|(a, b)| (*a - *b).length() / cell)
         .fold(0.0f32, f32::max);
-    assert!(worst <= 1e-5, "{name}: boundary points differ by {worst} cells");
+    assert!(
+        worst <= 1e-5,
+        "{name}: boundary points differ by {worst} cells"
+    );
 }
 
 /// Same band (except within 1e-4 cells of its edge), distances and vectors within 1e-4 cells.
 fn assert_same_field(name: &str, cpu: &DistanceField, gpu: &DistanceField) {
     assert_eq!(cpu.spec, gpu.spec);
     assert_eq!(cpu.band, gpu.band);
-    assert_eq!(cpu.points, gpu.points, "{name}: fields built from different points");
+    assert_eq!(
+        cpu.points, gpu.points,
+        "{name}: fields built from different points"
+    );
     let h = cpu.spec.cell;
     let a = cpu.band;
     let (mut edge, mut in_band) = (0, 0);
@@ -64,7 +78,10 @@ fn assert_same_field(name: &str, cpu: &DistanceField, gpu: &DistanceField) {
             (false, false) => {
                 in_band += 1;
                 let (dc, dg) = (cpu.dist[i] / h, gpu.dist[i] / h);
-                assert!((dc - dg).abs() <= 1e-4, "{name}: cell {i} distance {dg} vs CPU {dc} cells");
+                assert!(
+                    (dc - dg).abs() <= 1e-4,
+                    "{name}: cell {i} distance {dg} vs CPU {dc} cells"
+                );
                 let dv = (cpu.vector(i) - gpu.vector(i)).length() / h;
                 assert!(
                     dv <= 1e-4,
@@ -88,7 +105,10 @@ fn assert_same_field(name: &str, cpu: &DistanceField, gpu: &DistanceField) {
         }
     }
     assert!(in_band > 0, "{name}: empty band");
-    assert!(edge * 1000 <= in_band, "{name}: {edge} edge cells disagree of {in_band}");
+    assert!(
+        edge * 1000 <= in_band,
+        "{name}: {edge} edge cells disagree of {in_band}"
+    );
 }
 
 /// Voxelises and builds fields on both paths for every variant and band, comparing them.
@@ -101,7 +121,10 @@ fn check_against_cpu(ctx: &GpuContext, name: &str, mesh: &Mesh, resolution: u32)
         assert_same_boundary(&tag, &cpu_b, &gpu_b.to_cpu(ctx).unwrap());
         for band in BANDS {
             let cpu_f = build_field_cpu(&cpu_b, band).unwrap();
-            let gpu_f = build_field_gpu(ctx, &gpu_b, band).unwrap().to_cpu(ctx).unwrap();
+            let gpu_f = build_field_gpu(ctx, &gpu_b, band)
+                .unwrap()
+                .to_cpu(ctx)
+                .unwrap();
             assert_same_field(&format!("{tag} a={band}"), &cpu_f, &gpu_f);
         }
     }
@@ -135,9 +158,16 @@ fn axis_aligned_box_matches_cpu() {
     for variant in VARIANTS {
         let cpu_b = voxelize_cpu(&mesh, &spec, variant).unwrap();
         let gpu_b = voxelize_gpu(ctx, &mesh, &spec, variant).unwrap();
-        assert_same_boundary(&format!("box {variant:?}"), &cpu_b, &gpu_b.to_cpu(ctx).unwrap());
+        assert_same_boundary(
+            &format!("box {variant:?}"),
+            &cpu_b,
+            &gpu_b.to_cpu(ctx).unwrap(),
+        );
         let cpu_f = build_field_cpu(&cpu_b, 2.5).unwrap();
-        let gpu_f = build_field_gpu(ctx, &gpu_b, 2.5).unwrap().to_cpu(ctx).unwrap();
+        let gpu_f = build_field_gpu(ctx, &gpu_b, 2.5)
+            .unwrap()
+            .to_cpu(ctx)
+            .unwrap();
         assert_same_field(&format!("box {variant:?}"), &cpu_f, &gpu_f);
     }
 }
@@ -149,7 +179,10 @@ fn plane_distance_is_exact() {
     let z0 = 0.4321;
     let mut mesh = primitives::plane(4.0, 2);
     // plane() lies in x-z at y = 0: turn it to face +z and lift it to z0.
-    mesh.transform(glam::Mat4::from_translation(Vec3::Z * z0) * glam::Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2));
+    mesh.transform(
+        glam::Mat4::from_translation(Vec3::Z * z0)
+            * glam::Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2),
+    );
     let spec = GridSpec::new(Vec3::ZERO, 1.0 / 24.0, UVec3::splat(24)).unwrap();
     let band = 3.0;
     let b = voxelize_gpu(ctx, &mesh, &spec, BoundaryVariant::Closest).unwrap();
@@ -161,9 +194,15 @@ fn plane_distance_is_exact() {
         if exact <= band - 1e-3 {
             assert!(!f.is_far(i), "cell {i} at {exact} cells left far");
             let got = f.dist[i] / spec.cell;
-            assert!((got - exact).abs() < 1e-4, "cell {i}: {got} vs exact {exact}");
+            assert!(
+                (got - exact).abs() < 1e-4,
+                "cell {i}: {got} vs exact {exact}"
+            );
             let v = f.vector(i) / spec.cell;
-            assert!((v - Vec3::Z * (z0 - x.z) / spec.cell).length() < 1e-4, "cell {i}: vector {v}");
+            assert!(
+                (v - Vec3::Z * (z0 - x.z) / spec.cell).length() < 1e-4,
+                "cell {i}: vector {v}"
+            );
             checked += 1;
         } else if exact > band + 1e-3 {
             assert!(f.is_far(i), "cell {i} at {exact} cells is in the band");
@@ -244,7 +283,10 @@ fn grid_beyond_device_limits_is_an_error() {
         ] {
             assert!(matches!(e, Error::TooLarge { .. }), "{dims}: {e}");
             let msg = e.to_string();
-            assert!(msg.contains(&format!("{}x{}x{}", dims.x, dims.y, dims.z)), "{msg}");
+            assert!(
+                msg.contains(&format!("{}x{}x{}", dims.x, dims.y, dims.z)),
+                "{msg}"
+            );
         }
     }
 }
@@ -256,7 +298,11 @@ fn report_timings_sphere_64() {
     let Some(ctx) = test_context() else { return };
     let mesh = primitives::uv_sphere(0.7, 96, 48);
     let spec = GridSpec::fit(&mesh.bounds(), 64, 0.1).unwrap();
-    println!("adapter: {} (software: {})", ctx.adapter_name(), ctx.is_software());
+    println!(
+        "adapter: {} (software: {})",
+        ctx.adapter_name(),
+        ctx.is_software()
+    );
     for variant in VARIANTS {
         for round in 0..3 {
             let mut timer = GpuTimer::new(ctx);

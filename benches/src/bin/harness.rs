@@ -63,7 +63,7 @@ fn main() {
             )
             .unwrap();
             if variant == BoundaryVariant::Closest {
-                totals.push((name, r.voxelise_ms + r.field_ms, mesh.clone()));
+                totals.push((name, r.voxelise_ms + r.field_ms, mesh.clone(), r.field));
             }
             eprintln!("table 1: {name} {variant:?} done");
         }

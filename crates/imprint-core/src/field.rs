@@ -26,6 +26,9 @@ pub struct Boundary {
     pub cells: Vec<u32>,
     /// The boundary point of each surface cell, world units.
     pub points: Vec<Vec3>,
+    /// The triangle (world vertices) that owns each point: the surface triangle closest to the
+    /// cell centre, smallest index on ties. The field refines its distances with it.
+    pub faces: Vec<[Vec3; 3]>,
 }
 
 impl Boundary {
@@ -56,9 +59,13 @@ pub struct FieldSample {
     pub in_band: bool,
 }
 
-/// A narrow-band unsigned distance field: per cell, the distance to the nearest boundary point
-/// within `band` cells and which point that is. Cells farther than the band are "far": their
-/// distance is clamped to `far_value()` and their `nearest` is [`DistanceField::FAR`].
+/// A narrow-band unsigned distance field: per cell, which boundary point is nearest within
+/// `band` cells, and the distance. Cells farther than the band are "far": their distance is
+/// clamped to `far_value()` and their `nearest` is [`DistanceField::FAR`].
+///
+/// With `faces` (built from a `Closest` boundary) the distance and vector of a cell go to the
+/// closest point of the triangle that owns its nearest boundary point, not to the point itself:
+/// one point per cell misses ridges and tight curves by up to half a cell, the triangle does not.
 #[derive(Clone, Debug)]
 pub struct DistanceField {
     pub spec: GridSpec,
@@ -70,6 +77,8 @@ pub struct DistanceField {
     pub nearest: Vec<u32>,
     /// The boundary points the field was built from.
     pub points: Arc<Vec<Vec3>>,
+    /// The owning triangle of each point, when distances are refined to the triangles.
+    pub faces: Option<Arc<Vec<[Vec3; 3]>>>,
 }
 
 impl DistanceField {
@@ -90,7 +99,20 @@ impl DistanceField {
     pub fn vector(&self, index: usize) -> Vec3 {
         match self.nearest[index] {
             Self::FAR => Vec3::ZERO,
-            n => self.points[n as usize] - self.spec.center(self.spec.coords(index)),
+            n => self.closest_point(n as usize, self.spec.center(self.spec.coords(index))) - self.spec.center(self.spec.coords(index)),
+        }
+    }
+
+    /// The point boundary point `n` stands for as seen from `x`: itself, or with faces the
+    /// closest point of its triangle to `x`.
+    #[inline]
+    pub fn closest_point(&self, n: usize, x: Vec3) -> Vec3 {
+        match &self.faces {
+            Some(f) => {
+                let [a, b, c] = f[n];
+                crate::geom::closest_point_on_triangle(x, a, b, c)
+            }
+            None => self.points[n],
         }
     }
 

@@ -56,23 +56,36 @@ impl GpuContext {
     pub fn shared() -> Result<&'static GpuContext> {
         static SHARED: OnceLock<std::result::Result<GpuContext, String>> = OnceLock::new();
         SHARED
-            .get_or_init(|| GpuContext::new().map_err(|e| e.to_string()))
+            .get_or_init(|| {
+                GpuContext::new().map_err(|e| match e {
+                    Error::Gpu(msg) => msg,
+                    other => other.to_string(),
+                })
+            })
             .as_ref()
-            .map_err(|msg| Error::Gpu(msg.trim_start_matches("GPU: ").to_string()))
+            .map_err(|msg| Error::Gpu(msg.clone()))
     }
 
     /// A fresh context (prefer [`GpuContext::shared`]). Backends can be narrowed with the
     /// usual `WGPU_BACKEND` environment variable.
     pub fn new() -> Result<Self> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         let adapter = adapters
             .into_iter()
-            .filter(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS))
+            .filter(|a| {
+                a.get_downlevel_capabilities()
+                    .flags
+                    .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+            })
             .min_by_key(|a| {
                 let info = a.get_info();
                 // Vulkan first among equals: it is the backend the project tests on.
-                (rank(info.device_type), info.backend != wgpu::Backend::Vulkan)
+                (
+                    rank(info.device_type),
+                    info.backend != wgpu::Backend::Vulkan,
+                )
             })
             .ok_or_else(|| Error::Gpu(NO_ADAPTER.into()))?;
         let adapter_info = adapter.get_info();
@@ -85,7 +98,12 @@ impl GpuContext {
             required_limits: limits.clone(),
             ..Default::default()
         }))
-        .map_err(|e| Error::Gpu(format!("adapter '{}' refused a device: {e}", adapter_info.name)))?;
+        .map_err(|e| {
+            Error::Gpu(format!(
+                "adapter '{}' refused a device: {e}",
+                adapter_info.name
+            ))
+        })?;
         Ok(GpuContext {
             device,
             queue,
@@ -104,7 +122,10 @@ impl GpuContext {
 
     /// "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"-style name for logs and reports.
     pub fn adapter_name(&self) -> String {
-        format!("{} ({:?})", self.adapter_info.name, self.adapter_info.backend)
+        format!(
+            "{} ({:?})",
+            self.adapter_info.name, self.adapter_info.backend
+        )
     }
 
     pub fn has_timestamps(&self) -> bool {
@@ -113,7 +134,9 @@ impl GpuContext {
 
     /// The largest single buffer a shader can bind as storage on this device.
     pub fn max_storage_bytes(&self) -> u64 {
-        (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size)
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
     }
 
     /// Refuses, before allocating, a storage buffer of `bytes` that this device cannot bind,
@@ -166,7 +189,11 @@ impl GpuContext {
     }
 
     /// A storage buffer holding `data` (readable back, writable by the queue).
-    pub fn storage_buffer<T: bytemuck::Pod>(&self, label: &str, data: &[T]) -> Result<wgpu::Buffer> {
+    pub fn storage_buffer<T: bytemuck::Pod>(
+        &self,
+        label: &str,
+        data: &[T],
+    ) -> Result<wgpu::Buffer> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
         self.check_storage(label, bytes.len() as u64)?;
         // A zero-sized binding is invalid; an empty array becomes one zeroed word.
@@ -178,23 +205,41 @@ impl GpuContext {
             bytes
         };
         self.guarded(label, contents.len() as u64, || {
-            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            })
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                })
         })
     }
 
-    /// A zero-filled storage buffer of `bytes` (rounded up to a multiple of 4, at least 16).
+    /// A zero-filled storage buffer of `bytes` (rounded up to a multiple of 4, at least 16),
+    /// readable back and writable by the queue.
     pub fn zeroed_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
+        self.buffer(label, bytes, wgpu::BufferUsages::empty())
+    }
+
+    /// [`GpuContext::zeroed_buffer`] with extra usages (e.g. `INDIRECT` for dispatch arguments
+    /// a shader writes).
+    pub fn buffer(
+        &self,
+        label: &str,
+        bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer> {
         self.check_storage(label, bytes)?;
         let size = bytes.max(16).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
         self.guarded(label, size, || {
             self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST
+                    | extra,
                 mapped_at_creation: false,
             })
         })
@@ -202,11 +247,12 @@ impl GpuContext {
 
     /// A small uniform buffer holding `value` (parameters of a pass).
     pub fn uniform_buffer<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents: bytemuck::bytes_of(value),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        })
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(value),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
     }
 
     /// Copies a buffer (made with `COPY_SRC`, as all of ours are) back to the CPU, waiting for
@@ -223,7 +269,9 @@ impl GpuContext {
         })?;
         let mut encoder = self
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
@@ -257,7 +305,12 @@ impl GpuContext {
     /// `#include`: shared helpers from `shaders/common/` are prepended this way). Cached, so
     /// calling it every frame costs a hash. Shader errors come back as [`Error::Gpu`] with
     /// naga's message (which names the line).
-    pub fn pipeline(&self, label: &str, sources: &[&str], entry: &str) -> Result<wgpu::ComputePipeline> {
+    pub fn pipeline(
+        &self,
+        label: &str,
+        sources: &[&str],
+        entry: &str,
+    ) -> Result<wgpu::ComputePipeline> {
         let source = sources.join("\n");
         let key = {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -265,22 +318,31 @@ impl GpuContext {
             entry.hash(&mut h);
             h.finish()
         };
-        if let Some(p) = self.pipelines.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        if let Some(p) = self
+            .pipelines
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
             return Ok(p.clone());
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: None,
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+        let pipeline = self
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(Error::Gpu(format!("shader '{label}' entry '{entry}': {e}")));
         }
@@ -327,7 +389,12 @@ impl GpuContext {
 
     /// Records a pass that sets every u32 of `buffer` to `value` (atomicMin targets start at
     /// u32::MAX; `clear_buffer` only writes zeros).
-    pub fn fill_u32(&self, encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer, value: u32) -> Result<()> {
+    pub fn fill_u32(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        buffer: &wgpu::Buffer,
+        value: u32,
+    ) -> Result<()> {
         #[repr(C)]
         #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
         struct Fill {
@@ -339,7 +406,10 @@ impl GpuContext {
             .map_err(|_| Error::Gpu("buffer too large to fill with 32-bit indices".into()))?;
         let pipeline = self.pipeline(
             "fill_u32",
-            &[crate::shader!("common/dispatch.wgsl"), crate::shader!("common/fill.wgsl")],
+            &[
+                crate::shader!("common/dispatch.wgsl"),
+                crate::shader!("common/fill.wgsl"),
+            ],
             "fill_u32",
         )?;
         let params = self.uniform_buffer(

@@ -109,9 +109,10 @@ impl GpuTimer {
         if let (Some(q), false) = (&self.queries, labels.is_empty()) {
             let (tx, rx) = std::sync::mpsc::channel();
             let bytes = labels.len() as u64 * 16;
-            q.readback.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-                let _ = tx.send(r);
-            });
+            q.readback
+                .map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
+                    let _ = tx.send(r);
+                });
             ctx.wait()?;
             rx.recv()
                 .map_err(|_| Error::Gpu("timestamp readback never completed".into()))?
@@ -124,7 +125,10 @@ impl GpuTimer {
                 let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&view[..]);
                 for (i, label) in labels.into_iter().enumerate() {
                     let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
-                    passes.push((label, Duration::from_nanos((dt as f64 * self.period_ns) as u64)));
+                    passes.push((
+                        label,
+                        Duration::from_nanos((dt as f64 * self.period_ns) as u64),
+                    ));
                 }
             }
             q.readback.unmap();

@@ -152,7 +152,7 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                         let b = if *on_gpu {
                             let ctx = gpu.expect("GPU chosen at build");
                             let b = imprint_stages::voxel::gpu::voxelize_gpu(ctx, mesh, spec, *variant)?;
-                            ctx.wait();
+                            ctx.wait()?;
                             BoundaryValue::Gpu(Arc::new(b))
                         } else {
                             let vox = cpu.as_mut().expect("CPU voxeliser built");
@@ -178,7 +178,7 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                                 BoundaryValue::Cpu(c) => Arc::new(GpuBoundary::from_cpu(ctx, c)?),
                             };
                             let f = imprint_stages::sdf::gpu::build_field_gpu(ctx, &gb, *band)?;
-                            ctx.wait();
+                            ctx.wait()?;
                             FieldValue::Gpu(Arc::new(f))
                         } else {
                             let cb = match b {
@@ -246,7 +246,7 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                             n += imprint_render::field_io::write_field(dir, input, frame, &field)?.len();
                         }
                         for s in slices.iter() {
-                            imprint_render::slice::write_field_slice_for_frame(dir, input, frame, &field, s)?;
+                            write_slice(dir, input, frame, &field, s)?;
                             n += 1;
                         }
                         report.files_written += n;
@@ -267,6 +267,27 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
     let json = serde_json::to_string_pretty(&report).expect("report is plain data");
     imprint_core::io::atomic_write_bytes(&opts.out.join("report.json"), json.as_bytes())?;
     Ok(report)
+}
+
+/// Writes `DIR/<field>_<frame:04>_<axis><index>.png`, titled with the field and frame.
+fn write_slice(
+    dir: &std::path::Path,
+    field_name: &str,
+    frame: u32,
+    field: &DistanceField,
+    opts: &SliceOptions,
+) -> crate::Result<()> {
+    let index = opts.resolve_index(&field.spec)?;
+    let mut opts = opts.clone();
+    if opts.title.is_none() {
+        opts.title = Some(format!("{field_name}  frame {frame:04}"));
+    }
+    let path = dir.join(format!(
+        "{field_name}_{frame:04}_{}{index}.png",
+        opts.axis.letter()
+    ));
+    imprint_render::slice::write_field_slice(&path, field, &opts)?;
+    Ok(())
 }
 
 /// The CPU copy of a field node's value this frame (read back once per frame if on the GPU).

@@ -46,7 +46,10 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Plan> {
 /// Validates pipeline text (`source.name` is used in messages).
 pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
     let file: PipelineFile = ron::Options::default()
-        .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+        .with_default_extension(
+            ron::extensions::Extensions::IMPLICIT_SOME
+                | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
+        )
         .from_str(&source.text)
         .map_err(|e| ron_error(&source, &e))?;
     let whole = 0..source.text.len().min(8);

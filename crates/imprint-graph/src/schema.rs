@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+#[serde(rename = "Pipeline", deny_unknown_fields)]
 pub struct PipelineFile {
     /// Number of frames to run.
     pub frames: u32,

@@ -14,7 +14,6 @@ use crate::npy::write_npy_f32;
 use imprint_core::io::atomic_write;
 use imprint_core::{DistanceField, Error, Result};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The index-order sentence written into every `_field.json`.
@@ -87,7 +86,12 @@ pub fn field_file_names(name: &str, frame: u32) -> [String; 3] {
 
 /// Writes `field` as `dir/<name>_<frame:04>_{dist.npy, vec.npy, field.json}` and returns the
 /// three paths in that order. `name` must be a plain file-name stem (no separators).
-pub fn write_field(dir: &Path, name: &str, frame: u32, field: &DistanceField) -> Result<Vec<PathBuf>> {
+pub fn write_field(
+    dir: &Path,
+    name: &str,
+    frame: u32,
+    field: &DistanceField,
+) -> Result<Vec<PathBuf>> {
     if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
         return Err(Error::Invalid(format!(
             "field name {name:?} must be a non-empty file name without path separators"
@@ -95,7 +99,11 @@ pub fn write_field(dir: &Path, name: &str, frame: u32, field: &DistanceField) ->
     }
     check_field(field)?;
     let spec = &field.spec;
-    let shape = [spec.dims.z as usize, spec.dims.y as usize, spec.dims.x as usize];
+    let shape = [
+        spec.dims.z as usize,
+        spec.dims.y as usize,
+        spec.dims.x as usize,
+    ];
     let [dist_name, vec_name, json_name] = field_file_names(name, frame);
     let paths: Vec<PathBuf> = [&dist_name, &vec_name, &json_name]
         .iter()
@@ -155,7 +163,14 @@ mod tests {
                 points.push(Vec3::new(plane_x, c.y, c.z));
             }
         }
-        DistanceField { spec, band, dist, nearest, points: Arc::new(points) }
+        DistanceField {
+            spec,
+            band,
+            dist,
+            nearest,
+            points: Arc::new(points),
+            faces: None,
+        }
     }
 
     #[test]
@@ -163,9 +178,18 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let field = plane_field();
         let paths = write_field(dir.path(), "body", 12, &field).unwrap();
-        let names: Vec<String> =
-            paths.iter().map(|p| p.file_name().unwrap().to_string_lossy().into()).collect();
-        assert_eq!(names, ["body_0012_dist.npy", "body_0012_vec.npy", "body_0012_field.json"]);
+        let names: Vec<String> = paths
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "body_0012_dist.npy",
+                "body_0012_vec.npy",
+                "body_0012_field.json"
+            ]
+        );
 
         let (shape, dist) = read_npy_f32(&paths[0]).unwrap();
         assert_eq!(shape, [3, 4, 5], "[nz, ny, nx]");
@@ -174,13 +198,21 @@ mod tests {
 
         let (vshape, vec) = read_npy_f32(&paths[1]).unwrap();
         assert_eq!(vshape, [3, 4, 5, 3]);
-        // A chosen in-band cell (i, j, k) = (1, 2, 1) and a far one (4, 0, 2).
-        for c in [UVec3::new(1, 2, 1), UVec3::new(4, 0, 2), UVec3::new(3, 3, 0)] {
+        // A chosen in-band cell (i, j, k) = (1, 2, 1) and a far one (0, 0, 2), x = 0.25 being 1.05 from the plane.
+        for c in [
+            UVec3::new(1, 2, 1),
+            UVec3::new(0, 0, 2),
+            UVec3::new(3, 3, 0),
+        ] {
             let index = field.spec.index(c);
             let at = ((c.z as usize * 4 + c.y as usize) * 5 + c.x as usize) * 3;
-            assert_eq!(Vec3::from_slice(&vec[at..at + 3]), field.vector(index), "cell {c}");
+            assert_eq!(
+                Vec3::from_slice(&vec[at..at + 3]),
+                field.vector(index),
+                "cell {c}"
+            );
         }
-        let far = field.spec.index(UVec3::new(4, 0, 2));
+        let far = field.spec.index(UVec3::new(0, 0, 2));
         assert!(field.is_far(far));
         assert_eq!(&vec[far * 3..far * 3 + 3], &[0.0; 3]);
         let near = field.spec.index(UVec3::new(1, 2, 1));
@@ -210,7 +242,17 @@ mod tests {
         assert!(!meta.layout.contains('\n'));
         // The raw keys a non-Rust reader uses.
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-        for key in ["origin", "cell_size", "dims", "band", "far", "frame", "layout", "boundary_points", "band_cells"] {
+        for key in [
+            "origin",
+            "cell_size",
+            "dims",
+            "band",
+            "far",
+            "frame",
+            "layout",
+            "boundary_points",
+            "band_cells",
+        ] {
             assert!(v.get(key).is_some(), "missing {key}");
         }
     }
@@ -220,15 +262,25 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let field = plane_field();
         for name in ["", "a/b", "..", "x\\y"] {
-            assert!(matches!(write_field(dir.path(), name, 0, &field), Err(Error::Invalid(_))));
+            assert!(matches!(
+                write_field(dir.path(), name, 0, &field),
+                Err(Error::Invalid(_))
+            ));
         }
         let mut short = field.clone();
         short.dist.pop();
-        assert!(matches!(write_field(dir.path(), "s", 0, &short), Err(Error::Invalid(_))));
+        assert!(matches!(
+            write_field(dir.path(), "s", 0, &short),
+            Err(Error::Invalid(_))
+        ));
         let mut dangling = field;
         dangling.nearest[0] = 10_000;
         let e = write_field(dir.path(), "d", 0, &dangling).unwrap_err();
         assert!(e.to_string().contains("10000"), "{e}");
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing written");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "nothing written"
+        );
     }
 }

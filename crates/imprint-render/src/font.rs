@@ -118,7 +118,9 @@ const GLYPHS: [(char, [u8; 7]); 95] = [
 ];
 
 /// Drawn for characters the font lacks: an empty box.
-const MISSING: [u8; 7] = [0b11111, 0b10001, 0b10001, 0b10001, 0b10001, 0b10001, 0b11111];
+const MISSING: [u8; 7] = [
+    0b11111, 0b10001, 0b10001, 0b10001, 0b10001, 0b10001, 0b11111,
+];
 
 /// The 7 rows of `c`'s glyph (bit 4 = leftmost column), or None if the font lacks it.
 pub fn glyph(c: char) -> Option<[u8; 7]> {
@@ -198,7 +200,12 @@ mod tests {
         }
         for (i, a) in GLYPHS.iter().enumerate() {
             for b in &GLYPHS[i + 1..] {
-                assert!(a.1 != b.1 || a.0 == ' ', "{:?} and {:?} look the same", a.0, b.0);
+                assert!(
+                    a.1 != b.1 || a.0 == ' ',
+                    "{:?} and {:?} look the same",
+                    a.0,
+                    b.0
+                );
             }
         }
     }

@@ -10,7 +10,12 @@ use std::path::Path;
 pub fn write_png(path: &Path, img: &RgbImage) -> Result<()> {
     atomic_write(path, |w| {
         PngEncoder::new(w)
-            .write_image(img.as_raw(), img.width(), img.height(), ExtendedColorType::Rgb8)
+            .write_image(
+                img.as_raw(),
+                img.width(),
+                img.height(),
+                ExtendedColorType::Rgb8,
+            )
             .map_err(std::io::Error::other)
     })
 }

@@ -412,19 +412,54 @@ fn add_legend(
     // Axis labels: index 0 at the bottom-left, the last index at the ends, the letter mid-way.
     let right_align = |s: &str, x: i64| x - text_width(s, ts) as i64;
     draw_text(&mut img, right_align(&v_top, x0 - gap), y0, &v_top, ts, INK);
-    draw_text(&mut img, right_align(&v_name, x0 - gap), y0 + sh / 2 - cap / 2, &v_name, ts, INK);
-    draw_text(&mut img, right_align("0", x0 - gap), y0 + sh - cap, "0", ts, INK);
+    draw_text(
+        &mut img,
+        right_align(&v_name, x0 - gap),
+        y0 + sh / 2 - cap / 2,
+        &v_name,
+        ts,
+        INK,
+    );
+    draw_text(
+        &mut img,
+        right_align("0", x0 - gap),
+        y0 + sh - cap,
+        "0",
+        ts,
+        INK,
+    );
     let below = y0 + sh + gap;
     let u_last = (plane.nu - 1).to_string();
     let u_name = plane.u.letter().to_string();
     draw_text(&mut img, x0, below, "0", ts, INK);
-    draw_text(&mut img, x0 + sw / 2 - text_width(&u_name, ts) as i64 / 2, below, &u_name, ts, INK);
-    draw_text(&mut img, right_align(&u_last, x0 + sw), below, &u_last, ts, INK);
+    draw_text(
+        &mut img,
+        x0 + sw / 2 - text_width(&u_name, ts) as i64 / 2,
+        below,
+        &u_name,
+        ts,
+        INK,
+    );
+    draw_text(
+        &mut img,
+        right_align(&u_last, x0 + sw),
+        below,
+        &u_last,
+        ts,
+        INK,
+    );
 
     // The far swatch.
     fill_rect(&mut img, bar_x, swatch_y, bar_w, bar_w, FAR_GREY);
     frame(&mut img, bar_x, swatch_y, bar_w, bar_w);
-    draw_text(&mut img, label_x, swatch_y + (bar_w - cap) / 2, "far", ts, INK);
+    draw_text(
+        &mut img,
+        label_x,
+        swatch_y + (bar_w - cap) / 2,
+        "far",
+        ts,
+        INK,
+    );
 
     // The bar: 0 cells at the bottom, band at the top.
     let value_y = |v: f32| bar_bottom - 1 - (v / field.band * (bar_h - 1) as f32).round() as i64;
@@ -489,6 +524,7 @@ mod tests {
             dist,
             nearest,
             points: Arc::new(points),
+            faces: None,
         }
     }
 
@@ -505,7 +541,8 @@ mod tests {
     /// Colour of cell (a right, b up) in a bare slice at `ppc` pixels per cell.
     fn cell_px(img: &RgbImage, a: u32, b: u32, ppc: u32) -> [u8; 3] {
         let rows = img.height() / ppc;
-        img.get_pixel(a * ppc + ppc / 2, (rows - 1 - b) * ppc + ppc / 2).0
+        img.get_pixel(a * ppc + ppc / 2, (rows - 1 - b) * ppc + ppc / 2)
+            .0
     }
 
     #[test]
@@ -556,12 +593,12 @@ mod tests {
         assert_eq!(img.get_pixel(3 * 9 + 1, 4 * 9 + 7).0, viridis(0.0));
         // Rows y = 1 (level 0) and y = 2 (level 1) differ: a dark line on y = 1's top row.
         let line = img.get_pixel(3 * 9 + 4, 4 * 9).0;
-        let inside = viridis(0.0);
-        assert!(line.iter().zip(inside).all(|(l, c)| *l < c || c == 0), "{line:?}");
-        assert!(line[2] < inside[2]);
-        // Between y = 4 (level 1... 3, in band) and y = 5 (far) no line is drawn.
-        let far_edge = img.get_pixel(2 * 9 + 4, 9 - 1).0;
-        assert_eq!(far_edge, FAR_GREY.0);
+        assert_eq!(line, viridis(0.0).map(|c| (c as f32 * 0.35) as u8));
+        // Between y = 3 (level 2, in band) and y = 4 (far) no line: y = 3's top row keeps
+        // the colour of 2 cells.
+        assert_eq!(img.get_pixel(2 * 9 + 4, 2 * 9).0, viridis(1.0));
+        // Only cells holding their nearest point are marked: none in row y = 2.
+        assert!((0..8 * 9).all(|x| img.get_pixel(x, 3 * 9 + 4).0 != BOUNDARY_MARK.0));
     }
 
     #[test]
@@ -570,9 +607,14 @@ mod tests {
         let e = render_field_slice(&field, &bare(Axis::Y, SliceIndex::Cell(6), 1)).unwrap_err();
         let msg = e.to_string();
         assert!(matches!(e, Error::Invalid(_)));
-        assert!(msg.contains("6") && msg.contains("Y") && msg.contains("6 cells"), "{msg}");
+        assert!(
+            msg.contains("6") && msg.contains("Y") && msg.contains("6 cells"),
+            "{msg}"
+        );
         assert!(render_field_slice(&field, &bare(Axis::Z, SliceIndex::Fraction(1.5), 1)).is_err());
-        assert!(render_field_slice(&field, &bare(Axis::Z, SliceIndex::Fraction(f32::NAN), 1)).is_err());
+        assert!(
+            render_field_slice(&field, &bare(Axis::Z, SliceIndex::Fraction(f32::NAN), 1)).is_err()
+        );
         assert!(render_field_slice(&field, &bare(Axis::Z, SliceIndex::Cell(3), 0)).is_err());
         // The ends resolve inside the axis.
         assert_eq!(SliceIndex::Fraction(1.0).resolve(Axis::X, 8).unwrap(), 7);
@@ -588,7 +630,8 @@ mod tests {
         assert_eq!(o.index, SliceIndex::Fraction(0.25));
         assert!(o.legend && o.iso_lines && o.mark_boundary && o.pixels_per_cell.is_none());
         let v: Vec<SliceOptions> =
-            ron::from_str("[(axis: Z, index: Middle), (index: Cell(3), iso_lines: false)]").unwrap();
+            ron::from_str("[(axis: Z, index: Middle), (index: Cell(3), iso_lines: false)]")
+                .unwrap();
         assert_eq!(v[1].axis, Axis::Z);
         assert_eq!(v[1].index, SliceIndex::Cell(3));
         assert!(!v[1].iso_lines);
@@ -602,7 +645,10 @@ mod tests {
         assert_eq!(z.resolve_pixels_per_cell(&spec).unwrap(), 5); // 96 long -> 480 px
         let x = SliceOptions::new(Axis::X, SliceIndex::Middle);
         assert_eq!(x.resolve_pixels_per_cell(&spec).unwrap(), 4); // 128 long -> 512 px
-        let huge = SliceOptions { pixels_per_cell: Some(1000), ..x };
+        let huge = SliceOptions {
+            pixels_per_cell: Some(1000),
+            ..x
+        };
         assert!(huge.resolve_pixels_per_cell(&spec).is_err());
     }
 
@@ -615,14 +661,24 @@ mod tests {
             ..SliceOptions::new(Axis::Z, SliceIndex::Cell(1))
         };
         let img = render_field_slice(&field, &opts).unwrap();
-        let bare_img = render_field_slice(&field, &SliceOptions { legend: false, ..opts.clone() }).unwrap();
+        let bare_img = render_field_slice(
+            &field,
+            &SliceOptions {
+                legend: false,
+                ..opts.clone()
+            },
+        )
+        .unwrap();
         assert!(img.width() > bare_img.width() + 40 && img.height() > bare_img.height());
         // The bare slice appears unchanged somewhere on the page: find its top-left pixel
         // run (the far row) and compare the whole block.
         let found = (0..=img.height() - bare_img.height()).any(|y| {
             (0..=img.width() - bare_img.width()).any(|x| {
                 img.get_pixel(x, y) == bare_img.get_pixel(0, 0)
-                    && bare_img.enumerate_pixels().step_by(7).all(|(bx, by, p)| img.get_pixel(x + bx, y + by) == p)
+                    && bare_img
+                        .enumerate_pixels()
+                        .step_by(7)
+                        .all(|(bx, by, p)| img.get_pixel(x + bx, y + by) == p)
             })
         });
         assert!(found, "slice not found on the legend page");
@@ -637,7 +693,10 @@ mod tests {
         assert_eq!(ticks(2.5, 300, 20), vec![0.0, 1.0, 2.0, 2.5]);
         // A wide band on a short bar takes larger steps.
         let t = ticks(40.0, 200, 20);
-        assert!(t.windows(2).all(|w| (w[1] - w[0]) * 199.0 / 40.0 >= 20.0), "{t:?}");
+        assert!(
+            t.windows(2).all(|w| (w[1] - w[0]) * 199.0 / 40.0 >= 20.0),
+            "{t:?}"
+        );
         assert_eq!(t.first(), Some(&0.0));
         assert_eq!(tick_label(2.5), "2.5");
         assert_eq!(tick_label(3.0), "3");

@@ -679,7 +679,7 @@ mod tests {
                 "motion[0] Twist.period must be > 0",
             ),
             (
-                r#"(path: "a", motion: [Twist(axis: Y, degrees: nan)])"#,
+                r#"(path: "a", motion: [Twist(axis: Y, degrees: NaN)])"#,
                 "motion[0] Twist.degrees must be finite",
             ),
             (

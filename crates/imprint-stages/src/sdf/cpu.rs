@@ -4,9 +4,14 @@
 //! index, every point that can reach it, and keeps per cell the strictly nearest point, so
 //! ties go to the smaller index whatever the slab size or thread count: the result is the
 //! same bytes on every machine. Working slab by slab keeps the written cells in cache.
+//!
+//! For a `Closest` boundary, each band cell's distance is then refined to the exact distance
+//! to the triangle that owns its nearest point (see [`DistanceField`]); H's `Centre` boundary
+//! keeps point distances, as published.
 
 use glam::Vec3;
-use imprint_core::{Boundary, DistanceField, Error, Result};
+use imprint_core::geom::closest_point_on_triangle;
+use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -31,6 +36,13 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
     // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
     let unset = f32::from_bits(a2.to_bits() + 1);
     let far = band * spec.cell;
+    let refine = boundary.variant == BoundaryVariant::Closest;
+    // Owning triangles in grid units, for the refinement.
+    let faces: Vec<[Vec3; 3]> = if refine {
+        boundary.faces.par_iter().map(|f| f.map(|v| spec.to_cell(v))).collect()
+    } else {
+        Vec::new()
+    };
 
     let mut dist = vec![0f32; spec.len()];
     let mut nearest = vec![DistanceField::FAR; spec.len()];
@@ -46,8 +58,16 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
             for (pi, p) in pts.iter().enumerate().take(last).skip(first) {
                 splat_point(*p, pi as u32, band, a2, z0, z1, nx, ny, d2s, near);
             }
-            for (d, n) in d2s.iter_mut().zip(near.iter()) {
-                *d = if *n == DistanceField::FAR { far } else { d.sqrt() * spec.cell };
+            for (k, (d, n)) in d2s.iter_mut().zip(near.iter()).enumerate() {
+                *d = if *n == DistanceField::FAR {
+                    far
+                } else if refine {
+                    let x = Vec3::new((k % nx) as f32, ((k / nx) % ny) as f32, (z0 + k / nxy) as f32);
+                    let [a, b, c] = faces[*n as usize];
+                    (closest_point_on_triangle(x, a, b, c) - x).length() * spec.cell
+                } else {
+                    d.sqrt() * spec.cell
+                };
             }
         });
     Ok(DistanceField {
@@ -56,6 +76,7 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
         dist,
         nearest,
         points: Arc::new(boundary.points.clone()),
+        faces: refine.then(|| Arc::new(boundary.faces.clone())),
     })
 }
 

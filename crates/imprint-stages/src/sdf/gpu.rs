@@ -17,8 +17,8 @@ use imprint_core::{BoundaryVariant, DistanceField, Error, Result};
 use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
 use std::sync::Arc;
 
-/// Bytes per cell of the field's buffers: the vec4 field and two u32 minima.
-const BYTES_PER_CELL: u64 = 16 + 4 + 4;
+/// Bytes per cell of the field's largest buffer (the vec4 field; the limit is per binding).
+const BYTES_PER_CELL: u64 = 16;
 
 /// A narrow-band distance field on the GPU.
 #[derive(Clone, Debug)]
@@ -60,7 +60,9 @@ impl GpuField {
                     .cells
                     .binary_search(&c)
                     .map(|i| i as u32)
-                    .map_err(|_| Error::Gpu(format!("field names cell {c}, which is not a surface cell"))),
+                    .map_err(|_| {
+                        Error::Gpu(format!("field names cell {c}, which is not a surface cell"))
+                    }),
             })
             .collect::<Result<Vec<u32>>>()?;
         Ok(DistanceField {
@@ -69,6 +71,7 @@ impl GpuField {
             dist,
             nearest,
             points: Arc::new(boundary.points),
+            faces: None,
         })
     }
 }
@@ -86,7 +89,7 @@ struct FieldParams {
     mode: u32,
     centre: u32,
     zero: u32,
-    _pad: u32,
+    max_groups: u32,
 }
 
 /// The narrow-band field of half-width `band` cells around `boundary`, on the GPU. Submitted,
@@ -121,8 +124,13 @@ pub fn build_field_gpu_timed(
     let best_d2 = ctx.zeroed_buffer("field best d2", spec.len() as u64 * 4)?;
     let nearest_cell = ctx.zeroed_buffer("field nearest cell", spec.len() as u64 * 4)?;
     let field = ctx.zeroed_buffer("field", spec.len() as u64 * 16)?;
+    let surface = ctx.zeroed_buffer("field surface cells", spec.len() as u64 * 4)?;
+    let surface_count = ctx.zeroed_buffer("field surface count", 4)?;
+    let dispatch_args = ctx.buffer("field dispatch", 12, wgpu::BufferUsages::INDIRECT)?;
 
     let sources = [shader!("common/dispatch.wgsl"), shader!("sdf/field.wgsl")];
+    let compact = ctx.pipeline("field", &sources, "compact")?;
+    let size_dispatch = ctx.pipeline("field", &sources, "size_dispatch")?;
     let scatter = ctx.pipeline("field", &sources, "scatter")?;
     let finish = ctx.pipeline("field", &sources, "finish")?;
     let params = |mode: u32| FieldParams {
@@ -135,33 +143,80 @@ pub fn build_field_gpu_timed(
         mode,
         centre: (boundary.variant == BoundaryVariant::Centre) as u32,
         zero: 0,
-        _pad: 0,
+        max_groups: ctx.limits.max_compute_workgroups_per_dimension,
     };
 
     let mut encoder = ctx
         .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("distance field") });
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("distance field"),
+        });
     ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
     ctx.fill_u32(&mut encoder, &nearest_cell, u32::MAX)?;
+    let p0 = ctx.uniform_buffer("field params", &params(0));
+    {
+        let bind = ctx.bind_group(
+            "field compact",
+            &compact,
+            &[
+                (0, &p0),
+                (1, &boundary.points),
+                (6, &surface),
+                (7, &surface_count),
+            ],
+        );
+        let mut pass = compute_pass(&mut encoder, "field compact", timer.as_deref_mut());
+        pass.set_pipeline(&compact);
+        pass.set_bind_group(0, &bind, &[]);
+        ctx.dispatch_1d(&mut pass, n_cells);
+    }
+    {
+        let bind = ctx.bind_group(
+            "field size dispatch",
+            &size_dispatch,
+            &[(0, &p0), (7, &surface_count), (8, &dispatch_args)],
+        );
+        let mut pass = compute_pass(&mut encoder, "field size dispatch", None);
+        pass.set_pipeline(&size_dispatch);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
     for mode in [0, 1] {
         let p = ctx.uniform_buffer("field params", &params(mode));
         let bind = ctx.bind_group(
             "field scatter",
             &scatter,
-            &[(0, &p), (1, &boundary.points), (2, &best_d2), (3, &nearest_cell), (5, &axis_buf)],
+            &[
+                (0, &p),
+                (1, &boundary.points),
+                (2, &best_d2),
+                (3, &nearest_cell),
+                (5, &axis_buf),
+                (6, &surface),
+                (7, &surface_count),
+            ],
         );
-        let label = if mode == 0 { "field splat (distance)" } else { "field splat (point)" };
+        let label = if mode == 0 {
+            "field splat (distance)"
+        } else {
+            "field splat (point)"
+        };
         let mut pass = compute_pass(&mut encoder, label, timer.as_deref_mut());
         pass.set_pipeline(&scatter);
         pass.set_bind_group(0, &bind, &[]);
-        ctx.dispatch_1d(&mut pass, n_cells);
+        pass.dispatch_workgroups_indirect(&dispatch_args, 0);
     }
     {
-        let p = ctx.uniform_buffer("field params", &params(0));
         let bind = ctx.bind_group(
             "field finish",
             &finish,
-            &[(0, &p), (1, &boundary.points), (2, &best_d2), (3, &nearest_cell), (4, &field)],
+            &[
+                (0, &p0),
+                (1, &boundary.points),
+                (2, &best_d2),
+                (3, &nearest_cell),
+                (4, &field),
+            ],
         );
         let mut pass = compute_pass(&mut encoder, "field finish", timer.as_deref_mut());
         pass.set_pipeline(&finish);

@@ -90,12 +90,13 @@ impl Voxelizer {
             });
 
         // Pass 2: surface cells in increasing index; reset what was touched.
-        let parts: Vec<(Vec<u32>, Vec<Vec3>)> = occupied
+        let parts: Vec<(Vec<u32>, Vec<Vec3>, Vec<[Vec3; 3]>)> = occupied
             .par_chunks(WORDS_PER_TASK)
             .enumerate()
             .map(|(chunk, words)| {
                 let mut cells = Vec::new();
                 let mut points = Vec::new();
+                let mut faces = Vec::new();
                 for (w, word) in words.iter().enumerate() {
                     let mut bits = word.swap(0, Relaxed);
                     while bits != 0 {
@@ -104,34 +105,38 @@ impl Voxelizer {
                         let cell = (chunk * WORDS_PER_TASK + w) * 64 + bit;
                         let key = best[cell].swap(EMPTY, Relaxed);
                         let coords = spec.coords(cell);
+                        let tri = mesh.triangles[(key & 0xffff_ffff) as usize];
                         let point = match variant {
                             BoundaryVariant::Centre => spec.center(coords),
                             BoundaryVariant::Closest => {
-                                let [a, b, c] = mesh.triangles[(key & 0xffff_ffff) as usize]
-                                    .map(|i| verts[i as usize]);
+                                let [a, b, c] = tri.map(|i| verts[i as usize]);
                                 let q = closest_point_on_triangle(coords.as_vec3(), a, b, c);
                                 spec.origin + q * spec.cell
                             }
                         };
                         cells.push(cell as u32);
                         points.push(point);
+                        faces.push(tri.map(|i| mesh.positions[i as usize]));
                     }
                 }
-                (cells, points)
+                (cells, points, faces)
             })
             .collect();
         let total = parts.iter().map(|p| p.0.len()).sum();
         let mut cells = Vec::with_capacity(total);
         let mut points = Vec::with_capacity(total);
-        for (c, p) in parts {
+        let mut faces = Vec::with_capacity(total);
+        for (c, p, f) in parts {
             cells.extend(c);
             points.extend(p);
+            faces.extend(f);
         }
         Ok(Boundary {
             spec,
             variant,
             cells,
             points,
+            faces,
         })
     }
 }

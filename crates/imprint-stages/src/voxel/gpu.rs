@@ -15,8 +15,8 @@ use glam::Vec3;
 use imprint_core::{Boundary, BoundaryVariant, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
 
-/// Bytes per cell of the voxeliser's buffers: the point (vec4) and two u32 minima.
-const BYTES_PER_CELL: u64 = 16 + 4 + 4;
+/// Bytes per cell of the voxeliser's largest buffer (the vec4 points; the limit is per binding).
+const BYTES_PER_CELL: u64 = 16;
 
 /// A discrete boundary on the GPU: one `vec4<f32>` per grid cell, xyz the boundary point in
 /// grid coordinates (cell centres at integers) and w = 1 for surface cells, 0 elsewhere. Dense
@@ -30,6 +30,25 @@ pub struct GpuBoundary {
 }
 
 impl GpuBoundary {
+    /// Uploads a CPU boundary (for a GPU field built from a CPU voxelisation). Points go to
+    /// grid coordinates with `GridSpec::to_cell`.
+    pub fn from_cpu(ctx: &GpuContext, boundary: &Boundary) -> Result<GpuBoundary> {
+        let spec = boundary.spec;
+        ctx.check_grid("GPU boundary", spec.dims.to_array(), 16)?;
+        let mut dense = vec![[0f32; 4]; spec.len()];
+        for (&c, &p) in boundary.cells.iter().zip(&boundary.points) {
+            let slot = dense
+                .get_mut(c as usize)
+                .ok_or_else(|| Error::Invalid(format!("boundary cell {c} is outside its grid")))?;
+            *slot = spec.to_cell(p).extend(1.0).to_array();
+        }
+        Ok(GpuBoundary {
+            spec,
+            variant: boundary.variant,
+            points: ctx.storage_buffer("boundary points", &dense)?,
+        })
+    }
+
     /// Reads the boundary back and compacts it: surface cells in increasing linear index,
     /// world points computed as the CPU does (`origin + q * cell`).
     pub fn to_cpu(&self, ctx: &GpuContext) -> Result<Boundary> {
@@ -47,6 +66,7 @@ impl GpuBoundary {
             variant: self.variant,
             cells,
             points,
+            faces: Vec::new(),
         })
     }
 }
@@ -67,7 +87,12 @@ struct VoxelParams {
 
 /// The discrete boundary of `mesh` on `spec`, computed on the GPU and left there. The work is
 /// submitted, not waited for: reading it back (or the next stage's submit) orders it.
-pub fn voxelize_gpu(ctx: &GpuContext, mesh: &Mesh, spec: &GridSpec, variant: BoundaryVariant) -> Result<GpuBoundary> {
+pub fn voxelize_gpu(
+    ctx: &GpuContext,
+    mesh: &Mesh,
+    spec: &GridSpec,
+    variant: BoundaryVariant,
+) -> Result<GpuBoundary> {
     voxelize_gpu_timed(ctx, mesh, spec, variant, None)
 }
 
@@ -83,9 +108,16 @@ pub fn voxelize_gpu_timed(
     let dims = spec.dims;
     ctx.check_grid("GPU voxelisation", dims.to_array(), BYTES_PER_CELL)?;
     let n_cells = spec.len() as u32;
-    let n_tris = u32::try_from(mesh.triangles.len())
-        .map_err(|_| Error::Invalid(format!("{} triangles are more than the GPU path takes", mesh.triangles.len())))?;
-    ctx.check_storage("GPU voxelisation triangles", mesh.triangles.len() as u64 * 48)?;
+    let n_tris = u32::try_from(mesh.triangles.len()).map_err(|_| {
+        Error::Invalid(format!(
+            "{} triangles are more than the GPU path takes",
+            mesh.triangles.len()
+        ))
+    })?;
+    ctx.check_storage(
+        "GPU voxelisation triangles",
+        mesh.triangles.len() as u64 * 48,
+    )?;
 
     // Grid coordinates on the CPU, with the CPU's own function: the same bits on both paths.
     let verts: Vec<Vec3> = mesh.positions.iter().map(|&p| spec.to_cell(p)).collect();
@@ -119,11 +151,12 @@ pub fn voxelize_gpu_timed(
         n_cells,
         _pad: [0; 3],
     };
-    let touch_buffers = |p: &wgpu::Buffer| [(0, p), (1, &tri_buf), (2, &best_d2), (3, &best_tri)];
 
     let mut encoder = ctx
         .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("voxelize") });
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("voxelize"),
+        });
     ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
     ctx.fill_u32(&mut encoder, &best_tri, u32::MAX)?;
     // Mode 1 only chooses among triangles, which the Centre point does not depend on.
@@ -133,8 +166,16 @@ pub fn voxelize_gpu_timed(
     };
     for &mode in modes {
         let p = ctx.uniform_buffer("voxel params", &params(mode));
-        let bind = ctx.bind_group("voxel touch", &touch, &touch_buffers(&p));
-        let label = if mode == 0 { "voxel touch (distance)" } else { "voxel touch (triangle)" };
+        let bind = ctx.bind_group(
+            "voxel touch",
+            &touch,
+            &[(0, &p), (1, &tri_buf), (2, &best_d2), (3, &best_tri)],
+        );
+        let label = if mode == 0 {
+            "voxel touch (distance)"
+        } else {
+            "voxel touch (triangle)"
+        };
         let mut pass = compute_pass(&mut encoder, label, timer.as_deref_mut());
         pass.set_pipeline(&touch);
         pass.set_bind_group(0, &bind, &[]);
@@ -142,9 +183,17 @@ pub fn voxelize_gpu_timed(
     }
     {
         let p = ctx.uniform_buffer("voxel params", &params(0));
-        let mut buffers = touch_buffers(&p).to_vec();
-        buffers.push((4, &points));
-        let bind = ctx.bind_group("voxel finish", &finish, &buffers);
+        let bind = ctx.bind_group(
+            "voxel finish",
+            &finish,
+            &[
+                (0, &p),
+                (1, &tri_buf),
+                (2, &best_d2),
+                (3, &best_tri),
+                (4, &points),
+            ],
+        );
         let mut pass = compute_pass(&mut encoder, "voxel points", timer.as_deref_mut());
         pass.set_pipeline(&finish);
         pass.set_bind_group(0, &bind, &[]);
