@@ -332,3 +332,19 @@ fn report_timings_sphere_64() {
         }
     }
 }
+
+#[test]
+fn zz_debug() {
+    let Some(ctx) = test_context() else { return };
+    let mesh = primitives::uv_sphere(0.7, 48, 24);
+    let spec = GridSpec::fit(&mesh.bounds(), 40, 0.1).unwrap();
+    let b = voxelize_cpu(&mesh, &spec, BoundaryVariant::Closest).unwrap();
+    let cf = build_field_cpu(&b, 1.0).unwrap();
+    let gb = voxelize_gpu(ctx, &mesh, &spec, BoundaryVariant::Closest).unwrap();
+    let gf = build_field_gpu(ctx, &gb, 1.0).unwrap().to_cpu(ctx).unwrap();
+    let i = 3939;
+    let x = spec.coords(i);
+    let pc = spec.to_cell(cf.points[cf.nearest[i] as usize]);
+    let pg = spec.to_cell(gf.points[gf.nearest[i] as usize]);
+    println!("x {x} cpu p {pc} (cell {}) gpu p {pg} (cell {})", spec.coords(b.cells[cf.nearest[i] as usize] as usize), spec.coords(b.cells[gf.nearest[i] as usize] as usize));
+}

@@ -124,7 +124,7 @@ mod tests {
         } else {
             assert!(t.passes.is_empty());
         }
-        assert!(t.best() <= t.wall || t.gpu().is_some());
+        assert!(t.wall > std::time::Duration::ZERO);
         assert!(ctx.read_buffer::<u32>(&b).unwrap().iter().all(|&v| v == 5));
     }
 

@@ -28,11 +28,6 @@ pub struct MeshSource {
     rest_bounds: Aabb,
     motions: Vec<Compiled>,
     is_static: bool,
-    /// The triangles around each vertex (CSR, in triangle order, each stored as its three
-    /// corners so the per-frame gather streams through memory instead of chasing indices):
-    /// normals are then summed per vertex in parallel, in `Mesh::compute_normals`'s order.
-    vertex_start: Vec<u32>,
-    vertex_triangles: Vec<[u32; 3]>,
 }
 
 impl MeshSource {
@@ -56,14 +51,11 @@ impl MeshSource {
             .map(|m| Compiled::new(m, &rest_bounds))
             .collect();
         let is_static = params.motion.iter().all(Motion::is_time_invariant);
-        let (vertex_start, vertex_triangles) = vertex_triangles(&rest);
         Ok(MeshSource {
             rest,
             rest_bounds,
             motions,
             is_static,
-            vertex_start,
-            vertex_triangles,
         })
     }
 
@@ -139,30 +131,36 @@ impl MeshSource {
             });
     }
 
-    /// Area-weighted vertex normals, bit-identical to `Mesh::compute_normals` (same face
-    /// normal expression, summed in the same triangle order), gathered per vertex so that
-    /// threads never write to the same place.
+    /// Area-weighted vertex normals, bit-identical to `Mesh::compute_normals`: each task owns
+    /// a range of vertices and scatters into it the face normals of the triangles touching
+    /// it, in triangle order. Every vertex thus gets the same sum in the same order whatever
+    /// the number of tasks, and no two threads write to the same place.
     fn compute_normals(&self, positions: &[Vec3], normals: &mut Vec<Vec3>) {
-        normals.resize(positions.len(), Vec3::ZERO);
+        let n = positions.len();
+        normals.clear();
+        normals.resize(n, Vec3::ZERO);
+        let tasks = rayon::current_num_threads().clamp(1, n.div_ceil(CHUNK).max(1));
+        let per_task = n.div_ceil(tasks).max(1);
         normals
-            .par_chunks_mut(CHUNK)
+            .par_chunks_mut(per_task)
             .enumerate()
-            .for_each(|(chunk, out)| {
-                for (i, n) in out.iter_mut().enumerate() {
-                    let v = chunk * CHUNK + i;
-                    let range = self.vertex_start[v] as usize..self.vertex_start[v + 1] as usize;
-                    let sum =
-                        self.vertex_triangles[range]
-                            .iter()
-                            .fold(Vec3::ZERO, |s, &[a, b, c]| {
-                                let (a, b, c) = (
-                                    positions[a as usize],
-                                    positions[b as usize],
-                                    positions[c as usize],
-                                );
-                                s + (b - a).cross(c - a)
-                            });
-                    *n = sum.normalize_or_zero();
+            .for_each(|(k, out)| {
+                let low = (k * per_task) as u32;
+                let high = low + out.len() as u32;
+                for tri in &self.rest.triangles {
+                    if !tri.iter().any(|v| (low..high).contains(v)) {
+                        continue;
+                    }
+                    let [a, b, c] = tri.map(|v| positions[v as usize]);
+                    let face = (b - a).cross(c - a);
+                    for &v in tri {
+                        if (low..high).contains(&v) {
+                            out[(v - low) as usize] += face;
+                        }
+                    }
+                }
+                for n in out {
+                    *n = n.normalize_or_zero();
                 }
             });
     }
@@ -185,29 +183,6 @@ fn build_primitive(p: &Primitive) -> Mesh {
             sides,
         } => primitives::torus(major, minor, segments, sides),
     }
-}
-
-/// Counting sort of (vertex, triangle) incidences; a triangle naming a vertex twice is
-/// listed twice, as `compute_normals` adds it twice.
-fn vertex_triangles(mesh: &Mesh) -> (Vec<u32>, Vec<[u32; 3]>) {
-    let mut start = vec![0u32; mesh.positions.len() + 1];
-    for tri in &mesh.triangles {
-        for &v in tri {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for i in 1..start.len() {
-        start[i] += start[i - 1];
-    }
-    let mut next = start.clone();
-    let mut list = vec![[0u32; 3]; 3 * mesh.triangles.len()];
-    for tri in &mesh.triangles {
-        for &v in tri {
-            list[next[v as usize] as usize] = *tri;
-            next[v as usize] += 1;
-        }
-    }
-    (start, list)
 }
 
 #[cfg(test)]

@@ -612,6 +612,33 @@ mod tests {
     }
 
     #[test]
+    fn parses_as_a_pipeline_node_with_the_graph_extensions() {
+        // The graph reads `"name": Mesh(...)` with these extensions; optional fields written
+        // bare must read the same there as with plain `ron::from_str`.
+        #[derive(Deserialize)]
+        enum Node {
+            Mesh(MeshParams),
+        }
+        let options = ron::Options::default().with_default_extension(
+            ron::extensions::Extensions::IMPLICIT_SOME
+                | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
+        );
+        let text = r#"Mesh(path: "assets/meshes/stanford-bunny.obj", fit: (size: 1.0),
+                           motion: [Breathe(amplitude: 0.05, period: 2.0),
+                                    Twist(axis: Y, degrees: 30, period: 4)])"#;
+        let Node::Mesh(p) = options.from_str(text).unwrap();
+        assert_eq!(p, parse(&text["Mesh".len()..]).unwrap());
+        assert_eq!(
+            p.motion[1],
+            Motion::Twist {
+                axis: Axis::Y,
+                degrees: 30.0,
+                period: Some(4.0)
+            }
+        );
+    }
+
+    #[test]
     fn unknown_fields_are_rejected() {
         let e = parse(r#"(path: "a.obj", scale: 2.0)"#).unwrap_err();
         assert!(e.to_string().contains("scale"), "{e}");

@@ -5,8 +5,12 @@
 //! ties go to the smaller index whatever the slab size or thread count: the result is the
 //! same bytes on every machine. Working slab by slab keeps the written cells in cache.
 //!
-//! For a `Closest` boundary, each band cell's distance is then refined to the exact distance
-//! to the triangle that owns its nearest point (see [`DistanceField`]); H's `Centre` boundary
+//! For a `Closest` boundary a second pass refines each band cell to the exact distance to the
+//! best of a few triangles: the owner of its nearest point and the owners of its six
+//! neighbours' nearest points (a one-step closest-feature propagation). One point per cell
+//! misses ridges and tight curves by up to half a cell; its own triangle misses where the foot
+//! point lies on the next facet; the neighbours' triangles catch most of that. The pass reads
+//! only the finished first pass, so it is as deterministic as the first. H's `Centre` boundary
 //! keeps point distances, as published.
 
 use glam::Vec3;
@@ -58,18 +62,17 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
             for (pi, p) in pts.iter().enumerate().take(last).skip(first) {
                 splat_point(*p, pi as u32, band, a2, z0, z1, nx, ny, d2s, near);
             }
-            for (k, (d, n)) in d2s.iter_mut().zip(near.iter()).enumerate() {
-                *d = if *n == DistanceField::FAR {
-                    far
-                } else if refine {
-                    let x = Vec3::new((k % nx) as f32, ((k / nx) % ny) as f32, (z0 + k / nxy) as f32);
-                    let [a, b, c] = faces[*n as usize];
-                    (closest_point_on_triangle(x, a, b, c) - x).length() * spec.cell
-                } else {
-                    d.sqrt() * spec.cell
-                };
+            if !refine {
+                for (d, n) in d2s.iter_mut().zip(near.iter()) {
+                    *d = if *n == DistanceField::FAR { far } else { d.sqrt() * spec.cell };
+                }
             }
         });
+    let nearest = if refine {
+        refine_to_faces(&mut dist, &nearest, &faces, (nx, ny, nz), spec.cell, far)
+    } else {
+        nearest
+    };
     Ok(DistanceField {
         spec,
         band,
@@ -78,6 +81,63 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
         points: Arc::new(boundary.points.clone()),
         faces: refine.then(|| Arc::new(boundary.faces.clone())),
     })
+}
+
+/// The refinement pass: per band cell, the exact distance to the best owning triangle among
+/// its nearest point's and its six neighbours' nearest points'. Returns the new `nearest`
+/// (the point whose triangle won; ties to the smaller index) and writes world distances.
+fn refine_to_faces(
+    dist: &mut [f32],
+    nearest: &[u32],
+    faces: &[[Vec3; 3]],
+    (nx, ny, nz): (usize, usize, usize),
+    cell: f32,
+    far: f32,
+) -> Vec<u32> {
+    let nxy = nx * ny;
+    let mut owner = vec![DistanceField::FAR; nearest.len()];
+    dist.par_chunks_mut(nxy * SLAB_LAYERS)
+        .zip(owner.par_chunks_mut(nxy * SLAB_LAYERS))
+        .enumerate()
+        .for_each(|(slab, (dist, owner))| {
+            let base = slab * nxy * SLAB_LAYERS;
+            for k in 0..dist.len() {
+                let i = base + k;
+                let n0 = nearest[i];
+                if n0 == DistanceField::FAR {
+                    dist[k] = far;
+                    continue;
+                }
+                let (x, y, z) = (i % nx, (i / nx) % ny, i / nxy);
+                let p = Vec3::new(x as f32, y as f32, z as f32);
+                let mut cands = [n0; 7];
+                let mut m = 1;
+                let mut push = |j: usize| {
+                    let n = nearest[j];
+                    if n != DistanceField::FAR && !cands[..m].contains(&n) {
+                        cands[m] = n;
+                        m += 1;
+                    }
+                };
+                if x > 0 { push(i - 1) }
+                if x + 1 < nx { push(i + 1) }
+                if y > 0 { push(i - nx) }
+                if y + 1 < ny { push(i + nx) }
+                if z > 0 { push(i - nxy) }
+                if z + 1 < nz { push(i + nxy) }
+                let mut best = (f32::INFINITY, u32::MAX);
+                for &n in &cands[..m] {
+                    let [a, b, c] = faces[n as usize];
+                    let d2 = (closest_point_on_triangle(p, a, b, c) - p).length_squared();
+                    if d2 < best.0 || (d2 == best.0 && n < best.1) {
+                        best = (d2, n);
+                    }
+                }
+                dist[k] = best.0.sqrt() * cell;
+                owner[k] = best.1;
+            }
+        });
+    owner
 }
 
 /// Writes point `p` (grid units, index `pi`) into the cells of slab [z0, z1) within `band`.
