@@ -1,14 +1,32 @@
 // Geometric kernels, ported operation for operation from imprint_core::geom so that the GPU
-// makes the same decisions as the CPU reference (dot products are written out in glam's order:
-// x, then y, then z).
+// makes the same decisions as the CPU reference: dot and cross products written out in glam's
+// order, and every product rounded on its own (`rnd`) as the CPU rounds it.
+
+// Must hold 0: each entry point that uses these helpers copies it from a uniform first.
+var<private> geom_zero: u32;
+
+// x, rounded on its own. Vulkan lets a driver fuse `a * b + c` into one fma (NVIDIA does),
+// which rounds once where the CPU rounds twice and can decide a near-tie the other way; an
+// xor with a value the compiler cannot know is 0 keeps the product a separate operation.
+fn rnd(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ geom_zero);
+}
+
+fn rnd3(v: vec3<f32>) -> vec3<f32> {
+    return bitcast<vec3<f32>>(bitcast<vec3<u32>>(v) ^ vec3<u32>(geom_zero));
+}
 
 fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return a.x * b.x + a.y * b.y + a.z * b.z;
+    return rnd(a.x * b.x) + rnd(a.y * b.y) + rnd(a.z * b.z);
 }
 
 // glam's operand order (WGSL's cross() leaves it to the implementation).
 fn cross3(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
-    return vec3<f32>(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+    return vec3<f32>(
+        rnd(a.y * b.z) - rnd(b.y * a.z),
+        rnd(a.z * b.x) - rnd(b.z * a.x),
+        rnd(a.x * b.y) - rnd(b.x * a.y),
+    );
 }
 
 fn closest_on_segment(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
@@ -17,7 +35,7 @@ fn closest_on_segment(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     if l2 <= 0.0 {
         return a;
     }
-    return a + ab * clamp(dot3(p - a, ab) / l2, 0.0, 1.0);
+    return a + rnd3(ab * clamp(dot3(p - a, ab) / l2, 0.0, 1.0));
 }
 
 // Collinear vertices not caught by the Voronoi regions: the closest of the three edges.
@@ -56,10 +74,10 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     if d3 >= 0.0 && d4 <= d3 {
         return b;
     }
-    let vc = d1 * d4 - d3 * d2;
+    let vc = rnd(d1 * d4) - rnd(d3 * d2);
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return a + v * ab;
+        return a + rnd3(v * ab);
     }
     let cp = p - c;
     let d5 = dot3(ab, cp);
@@ -67,15 +85,15 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     if d6 >= 0.0 && d5 <= d6 {
         return c;
     }
-    let vb = d5 * d2 - d1 * d6;
+    let vb = rnd(d5 * d2) - rnd(d1 * d6);
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return a + w * ac;
+        return a + rnd3(w * ac);
     }
-    let va = d3 * d6 - d5 * d4;
+    let va = rnd(d3 * d6) - rnd(d5 * d4);
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return b + w * (c - b);
+        return b + rnd3(w * (c - b));
     }
     let denom = va + vb + vc;
     // f32::MIN_POSITIVE; `!(x <= MAX)` also catches inf and NaN.
@@ -85,7 +103,7 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     let inv = 1.0 / denom;
     let v = vb * inv;
     let w = vc * inv;
-    return a + ab * v + ac * w;
+    return a + rnd3(ab * v) + rnd3(ac * w);
 }
 
 // Does triangle (a, b, c) touch the closed box center ± half? Akenine-Möller's separating-axis
@@ -94,7 +112,7 @@ fn sat_axis(axis: vec3<f32>, v0: vec3<f32>, v1: vec3<f32>, v2: vec3<f32>, half: 
     let p0 = dot3(axis, v0);
     let p1 = dot3(axis, v1);
     let p2 = dot3(axis, v2);
-    let r = half.x * abs(axis.x) + half.y * abs(axis.y) + half.z * abs(axis.z);
+    let r = rnd(half.x * abs(axis.x)) + rnd(half.y * abs(axis.y)) + rnd(half.z * abs(axis.z));
     let lo = min(min(p0, p1), p2);
     let hi = max(max(p0, p1), p2);
     return !(lo > r || hi < -r);
@@ -122,7 +140,7 @@ fn triangle_box_overlap(center: vec3<f32>, half: vec3<f32>, a: vec3<f32>, b: vec
         return false;
     }
     let n = cross3(e0, e1);
-    let r = half.x * abs(n.x) + half.y * abs(n.y) + half.z * abs(n.z);
+    let r = rnd(half.x * abs(n.x)) + rnd(half.y * abs(n.y)) + rnd(half.z * abs(n.z));
     let s = dot3(n, v0);
     return abs(s) <= r;
 }

@@ -1,5 +1,5 @@
 // Narrow-band distance field from a discrete boundary (METHODS §2), the GPU twin of
-// imprint_stages::sdf::cpu. Prepended: common/dispatch.wgsl.
+// imprint_stages::sdf::cpu.
 //
 // In grid coordinates (cell centres at integers). Each boundary point writes into the cells
 // within `band` of it (H's splat), deterministically in three passes:
@@ -7,8 +7,13 @@
 //                   with |x - p_s|^2 <= band^2 (non-negative floats order like their bits);
 //   scatter, mode 1 (per surface cell s): where the bits equal the stored minimum, atomicMin
 //                   of s, so ties go to the smaller surface-cell index = smaller point index;
-//   finish          (per cell): distance and closest-point vector in world units.
+//   finish          (per cell): distance and closest-point vector in world units. For a
+//                   Closest boundary, refined as on the CPU: among the owning triangles of
+//                   the cell's nearest point and of its six neighbours' nearest points, the
+//                   one closest to the cell (ties to the smaller point index) gives the exact
+//                   distance and vector, and its point becomes the cell's nearest.
 // Modes 0 and 1 are one entry point so both compute the distance with the same code.
+// Prepended: common/dispatch.wgsl, common/geom.wgsl.
 // Splatting costs (surface cells) x (2a+1)^3 distance tests instead of (all cells) x (2a+2)^3
 // reads for a gather, and the boundary is a thin shell, so it is the cheaper side. The splat
 // runs one thread per surface cell from a compacted list (`compact`, then an indirect dispatch
@@ -29,10 +34,15 @@ struct FieldParams {
     mode: u32,
     // 1 when the boundary is the Centre variant (points at cell centres).
     centre: u32,
-    // Always 0; see `rnd`.
+    // Always 0; see `rnd` in common/geom.wgsl.
     zero: u32,
     // The device's max_compute_workgroups_per_dimension (for the indirect dispatch).
     max_groups: u32,
+    // 1: refine distances to the owning triangles (Closest boundaries).
+    refine: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 const FAR: u32 = 0xffffffffu;
@@ -41,7 +51,8 @@ const FAR: u32 = 0xffffffffu;
 // Per cell: xyz the boundary point (grid coordinates), w = 1 for surface cells (GpuBoundary).
 @group(0) @binding(1) var<storage, read> points: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> best_d2: array<atomic<u32>>;
-// Per cell: linear index of the surface cell whose point is nearest, or FAR.
+// Per cell: linear index of the surface cell whose point is nearest, or FAR (the splat's
+// result; `finish` writes the refined one to `nearest_out`).
 @group(0) @binding(3) var<storage, read_write> nearest: array<atomic<u32>>;
 // Per cell: xyz = p - x (world units, 0 when far), w = distance (world units, far_value when far).
 @group(0) @binding(4) var<storage, read_write> field: array<vec4<f32>>;
@@ -52,13 +63,12 @@ const FAR: u32 = 0xffffffffu;
 @group(0) @binding(7) var<storage, read_write> surface_count: atomic<u32>;
 // Indirect dispatch arguments (x, y, z workgroups) for one thread per surface cell.
 @group(0) @binding(8) var<storage, read_write> dispatch_args: array<u32, 3>;
-
-// The value of x, rounded on its own: an unknowable (to the compiler) no-op that keeps
-// `a * b + c` from being fused into one fma, which would round differently from the CPU and
-// decide exact ties (very common with Centre points) differently.
-fn rnd(x: f32) -> f32 {
-    return bitcast<f32>(bitcast<u32>(x) ^ params.zero);
-}
+// Per cell: index into `faces` of the owning triangle of its point (GpuBoundary::owner).
+@group(0) @binding(9) var<storage, read> owner: array<u32>;
+// Per face: three vertices in grid coordinates (GpuBoundary::faces).
+@group(0) @binding(10) var<storage, read> faces: array<vec4<f32>>;
+// Per cell: the final nearest surface cell, or FAR.
+@group(0) @binding(11) var<storage, read_write> nearest_out: array<u32>;
 
 fn coords(idx: u32) -> vec3<u32> {
     let nx = params.dims.x;
@@ -115,12 +125,13 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     if t >= atomicLoad(&surface_count) {
         return;
     }
+    geom_zero = params.zero;
     let s = surface[t];
     let point = points[s];
     let p = boundary_point(s, point.xyz);
     // Rows of the ball of radius `band` around p, a hair wide (SLACK): only ranges are cut
     // here; the d2 test below decides, exactly as on the CPU. The ball is a third of its cube.
-    let slack = 0.05;
+    let slack = 1e-3;
     let top = vec3<f32>(params.dims.xyz) - 1.0;
     let z_lo = max(ceil(p.z - params.band - slack), 0.0);
     let z_hi = min(floor(p.z + params.band + slack), top.z);
@@ -170,19 +181,73 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     }
 }
 
+// The closest point to x of the triangle that owns surface cell n's point.
+fn owner_closest(n: u32, x: vec3<f32>) -> vec3<f32> {
+    let f = 3u * owner[n];
+    return closest_point_on_triangle(x, faces[f].xyz, faces[f + 1u].xyz, faces[f + 2u].xyz);
+}
+
 @compute @workgroup_size(64)
 fn finish(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let idx = thread_index(gid, nwg);
     if idx >= params.dims.w {
         return;
     }
-    let n = atomicLoad(&nearest[idx]);
-    if n == FAR {
+    geom_zero = params.zero;
+    let n0 = atomicLoad(&nearest[idx]);
+    if n0 == FAR {
         field[idx] = vec4<f32>(0.0, 0.0, 0.0, params.far_value);
+        nearest_out[idx] = FAR;
         return;
     }
-    let x = vec3<f32>(coords(idx));
-    let d2 = bitcast<f32>(atomicLoad(&best_d2[idx]));
+    let c = coords(idx);
+    let x = vec3<f32>(c);
     let cell = params.origin.w;
-    field[idx] = vec4<f32>((points[n].xyz - x) * cell, sqrt(d2) * cell);
+    if params.refine == 0u {
+        let d2 = bitcast<f32>(atomicLoad(&best_d2[idx]));
+        field[idx] = vec4<f32>((points[n0].xyz - x) * cell, sqrt(d2) * cell);
+        nearest_out[idx] = n0;
+        return;
+    }
+    var best_n = n0;
+    var best_face = owner[n0];
+    var best_q = owner_closest(n0, x);
+    var best = dot3(best_q - x, best_q - x);
+    let strides = vec3<u32>(1u, params.dims.x, params.dims.x * params.dims.y);
+    for (var k = 0u; k < 6u; k++) {
+        let axis = k / 2u;
+        var j = idx;
+        if k % 2u == 0u {
+            if c[axis] == 0u {
+                continue;
+            }
+            j -= strides[axis];
+        } else {
+            if c[axis] + 1u >= params.dims[axis] {
+                continue;
+            }
+            j += strides[axis];
+        }
+        let n = atomicLoad(&nearest[j]);
+        if n == FAR {
+            continue;
+        }
+        // Neighbours mostly share the best triangle: the same face gives the same d2 bits,
+        // so only the point index can decide, and the closest point need not be recomputed.
+        if owner[n] == best_face {
+            best_n = min(best_n, n);
+            continue;
+        }
+        let q = owner_closest(n, x);
+        let d2 = dot3(q - x, q - x);
+        // The smallest (d2, point index): the order candidates come in does not matter.
+        if d2 < best || (d2 == best && n < best_n) {
+            best = d2;
+            best_n = n;
+            best_face = owner[n];
+            best_q = q;
+        }
+    }
+    field[idx] = vec4<f32>((best_q - x) * cell, sqrt(best) * cell);
+    nearest_out[idx] = best_n;
 }

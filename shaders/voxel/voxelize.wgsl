@@ -23,7 +23,8 @@ struct VoxelParams {
     // 0 = Centre, 1 = Closest.
     variant: u32,
     n_cells: u32,
-    _pad0: u32,
+    // Always 0; see `rnd` in common/geom.wgsl.
+    zero: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -49,6 +50,7 @@ fn touch(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
     if t >= params.dims.w {
         return;
     }
+    geom_zero = params.zero;
     let a = tris[3u * t].xyz;
     let b = tris[3u * t + 1u].xyz;
     let c = tris[3u * t + 2u].xyz;
@@ -95,6 +97,7 @@ fn finish(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     if idx >= params.n_cells {
         return;
     }
+    geom_zero = params.zero;
     if atomicLoad(&best_d2[idx]) == NONE {
         points[idx] = vec4<f32>(0.0);
         return;

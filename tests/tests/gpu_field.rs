@@ -4,6 +4,7 @@
 //! Grids stay small (<= 48^3): CI runs these on a software rasteriser (Mesa lavapipe).
 
 use glam::{UVec3, Vec3};
+use imprint_core::geom::closest_point_on_triangle;
 use imprint_core::mesh::primitives;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, Mesh};
 use imprint_gpu::{GpuContext, GpuTimer, test_context};
@@ -23,7 +24,8 @@ fn teapot() -> Mesh {
     .expect("teapot loads")
 }
 
-/// Same surface cells exactly; points within 1e-5 cells.
+/// Same surface cells exactly; points within 1e-5 cells; the same owning faces, or where they
+/// differ, faces equally near the cell centre (a tie between triangles that rounding decides).
 fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
     assert_eq!(cpu.spec, gpu.spec);
     assert_eq!(cpu.variant, gpu.variant);
@@ -57,15 +59,49 @@ fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
         worst <= 1e-5,
         "{name}: boundary points differ by {worst} cells"
     );
+    assert_eq!(cpu.faces.len(), cpu.len(), "{name}: CPU faces");
+    assert_eq!(gpu.faces.len(), gpu.len(), "{name}: GPU faces");
+    let spec = cpu.spec;
+    let mut swapped = 0;
+    for (k, (fc, fg)) in cpu.faces.iter().zip(&gpu.faces).enumerate() {
+        if fc != fg {
+            let x = spec.coords(cpu.cells[k] as usize).as_vec3();
+            let d = |f: &[Vec3; 3]| {
+                let [a, b, c] = f.map(|v| spec.to_cell(v));
+                (closest_point_on_triangle(x, a, b, c) - x).length()
+            };
+            assert!(
+                (d(fc) - d(fg)).abs() <= 1e-5,
+                "{name}: point {k} owned by different faces"
+            );
+            swapped += 1;
+        }
+    }
+    assert!(
+        swapped * 100 <= cpu.len(),
+        "{name}: {swapped} owning faces differ"
+    );
 }
 
 /// Same band (except within 1e-4 cells of its edge), distances and vectors within 1e-4 cells.
 fn assert_same_field(name: &str, cpu: &DistanceField, gpu: &DistanceField) {
     assert_eq!(cpu.spec, gpu.spec);
     assert_eq!(cpu.band, gpu.band);
+    assert_eq!(cpu.points.len(), gpu.points.len(), "{name}: point counts");
     assert_eq!(
-        cpu.points, gpu.points,
-        "{name}: fields built from different points"
+        cpu.faces.is_some(),
+        gpu.faces.is_some(),
+        "{name}: refinement"
+    );
+    let moved = cpu
+        .points
+        .iter()
+        .zip(gpu.points.iter())
+        .map(|(a, b)| (*a - *b).length() / cpu.spec.cell)
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved <= 1e-5,
+        "{name}: fields built from points {moved} cells apart"
     );
     let h = cpu.spec.cell;
     let a = cpu.band;
@@ -127,6 +163,12 @@ fn check_against_cpu(ctx: &GpuContext, name: &str, mesh: &Mesh, resolution: u32)
                 .unwrap();
             assert_same_field(&format!("{tag} a={band}"), &cpu_f, &gpu_f);
         }
+        // A CPU boundary uploaded gives the same field on the GPU.
+        let up = GpuBoundary::from_cpu(ctx, &cpu_b).unwrap();
+        assert_same_boundary(&format!("{tag} uploaded"), &cpu_b, &up.to_cpu(ctx).unwrap());
+        let gpu_f = build_field_gpu(ctx, &up, 2.5).unwrap().to_cpu(ctx).unwrap();
+        let cpu_f = build_field_cpu(&cpu_b, 2.5).unwrap();
+        assert_same_field(&format!("{tag} uploaded a=2.5"), &cpu_f, &gpu_f);
     }
 }
 
@@ -276,6 +318,9 @@ fn grid_beyond_device_limits_is_an_error() {
                     spec,
                     variant: BoundaryVariant::Closest,
                     points: ctx.zeroed_buffer("tiny", 16).unwrap(),
+                    owner: ctx.zeroed_buffer("tiny", 16).unwrap(),
+                    faces: ctx.zeroed_buffer("tiny", 48).unwrap(),
+                    faces_world: Default::default(),
                 },
                 2.0,
             )
@@ -331,20 +376,4 @@ fn report_timings_sphere_64() {
             let _ = f;
         }
     }
-}
-
-#[test]
-fn zz_debug() {
-    let Some(ctx) = test_context() else { return };
-    let mesh = primitives::uv_sphere(0.7, 48, 24);
-    let spec = GridSpec::fit(&mesh.bounds(), 40, 0.1).unwrap();
-    let b = voxelize_cpu(&mesh, &spec, BoundaryVariant::Closest).unwrap();
-    let cf = build_field_cpu(&b, 1.0).unwrap();
-    let gb = voxelize_gpu(ctx, &mesh, &spec, BoundaryVariant::Closest).unwrap();
-    let gf = build_field_gpu(ctx, &gb, 1.0).unwrap().to_cpu(ctx).unwrap();
-    let i = 3939;
-    let x = spec.coords(i);
-    let pc = spec.to_cell(cf.points[cf.nearest[i] as usize]);
-    let pg = spec.to_cell(gf.points[gf.nearest[i] as usize]);
-    println!("x {x} cpu p {pc} (cell {}) gpu p {pg} (cell {})", spec.coords(b.cells[cf.nearest[i] as usize] as usize), spec.coords(b.cells[gf.nearest[i] as usize] as usize));
 }

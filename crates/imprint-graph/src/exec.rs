@@ -69,6 +69,7 @@ enum Stage {
         /// The Mesh node behind the boundary: the exact reference for error measurement.
         mesh_node: String,
         measured: u32,
+        builder: imprint_stages::sdf::FieldBuilder,
     },
     WriteField {
         input: String,
@@ -166,8 +167,14 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                         false
                     }
                 }
-                Stage::Field { input, band, gpu: on_gpu, .. } => {
+                Stage::Field { input, band, gpu: on_gpu, builder, .. } => {
                     if first_run || changed[input.as_str()] {
+                        // Last frame's field, if nobody holds it any more, lends its buffers.
+                        if let Some(Value::Field(FieldValue::Cpu(old))) = values.remove(name.as_str()) {
+                            if let Ok(old) = Arc::try_unwrap(old) {
+                                builder.recycle(old);
+                            }
+                        }
                         let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
                             unreachable!("edges are typed")
                         };
@@ -185,7 +192,7 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                                 BoundaryValue::Cpu(c) => c.clone(),
                                 BoundaryValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
                             };
-                            FieldValue::Cpu(Arc::new(imprint_stages::sdf::build_field_cpu(&cb, *band)?))
+                            FieldValue::Cpu(Arc::new(builder.build(&cb, *band)?))
                         };
                         values.insert(name.clone(), Value::Field(f));
                         true
@@ -349,7 +356,12 @@ fn build_stages(
         let stage = match node {
             NodeSpec::Mesh(p) => {
                 let src = MeshSource::new(p, &plan.base_dir)?;
-                rest_bounds.insert(name.clone(), src.at(0.0).bounds());
+                // The box the mesh sweeps over the whole run (every frame up to 64 samples),
+                // so a fitted grid holds the motion and partial runs get the same grid.
+                let frames = plan.file.frames;
+                let step = frames.div_ceil(64).max(1) as usize;
+                let times = (0..frames).step_by(step).chain([frames - 1]).map(|f| f as f32 / plan.file.fps);
+                rest_bounds.insert(name.clone(), src.sampled_bounds(times));
                 Stage::Mesh(Box::new(src))
             }
             NodeSpec::Voxelize(v) => {
@@ -385,6 +397,7 @@ fn build_stages(
                     measure: f.measure,
                     mesh_node: v.mesh.clone(),
                     measured: 0,
+                    builder: Default::default(),
                 }
             }
             NodeSpec::WriteField(w) => Stage::WriteField {

@@ -66,9 +66,8 @@ pub struct VoxelizeNode {
 /// The grid a Voxelize node works on.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 pub enum GridChoice {
-    /// Cubic cells, `resolution` along the longest side of the mesh's box at time 0 grown by
-    /// `padding` (a fraction of that side) on every side. The grid stays fixed over the run,
-    /// so padding must cover the motion.
+    /// Cubic cells, `resolution` along the longest side of the box the mesh sweeps over the run,
+    /// grown by `padding` (a fraction of that side) on every side. The grid stays fixed.
     Fit {
         resolution: u32,
         #[serde(default = "default_padding")]

@@ -21,81 +21,138 @@ use std::sync::Arc;
 
 const SLAB_LAYERS: usize = 4;
 
-/// The narrow-band field of half-width `band` cells around `boundary`.
+/// The narrow-band field of half-width `band` cells around `boundary` (one-shot; keep a
+/// [`FieldBuilder`] across frames to reuse the grid-sized buffers).
 pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> {
-    validate_band(band)?;
-    let spec = boundary.spec;
-    spec.check_memory("distance field", 8)?;
-    let (nx, ny, nz) = (
-        spec.dims.x as usize,
-        spec.dims.y as usize,
-        spec.dims.z as usize,
-    );
-    let nxy = nx * ny;
-    let pts: Vec<Vec3> = boundary.points.par_iter().map(|&p| spec.to_cell(p)).collect();
-    // Points are in increasing cell index, so their cell z is non-decreasing.
-    let cell_z: Vec<usize> = boundary.cells.iter().map(|&c| c as usize / nxy).collect();
-    let reach = (band + 0.8661).floor() as usize;
-    let a2 = band * band;
-    // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
-    let unset = f32::from_bits(a2.to_bits() + 1);
-    let far = band * spec.cell;
-    let refine = boundary.variant == BoundaryVariant::Closest;
-    // Owning triangles in grid units, for the refinement.
-    let faces: Vec<[Vec3; 3]> = if refine {
-        boundary.faces.par_iter().map(|f| f.map(|v| spec.to_cell(v))).collect()
-    } else {
-        Vec::new()
-    };
+    FieldBuilder::default().build(boundary, band)
+}
 
-    let mut dist = vec![0f32; spec.len()];
-    let mut nearest = vec![DistanceField::FAR; spec.len()];
-    dist.par_chunks_mut(nxy * SLAB_LAYERS)
-        .zip(nearest.par_chunks_mut(nxy * SLAB_LAYERS))
-        .enumerate()
-        .for_each(|(slab, (d2s, near))| {
-            let z0 = slab * SLAB_LAYERS;
-            let z1 = (z0 + SLAB_LAYERS).min(nz);
-            d2s.fill(unset);
-            let first = cell_z.partition_point(|&z| z + reach < z0);
-            let last = cell_z.partition_point(|&z| z <= z1 - 1 + reach);
-            for (pi, p) in pts.iter().enumerate().take(last).skip(first) {
-                splat_point(*p, pi as u32, band, a2, z0, z1, nx, ny, d2s, near);
+/// Builds fields frame after frame, reusing the buffers of fields given back with
+/// [`FieldBuilder::recycle`]: fresh grid-sized allocations cost page faults every frame.
+#[derive(Default)]
+pub struct FieldBuilder {
+    spare: Vec<Vec<u32>>,
+    spare_dist: Option<Vec<f32>>,
+}
+
+impl FieldBuilder {
+    /// Takes back a field nobody else holds, for its buffers.
+    pub fn recycle(&mut self, field: DistanceField) {
+        self.spare_dist = Some(field.dist);
+        self.spare.push(field.nearest);
+    }
+
+    fn buffer_u32(&mut self, n: usize) -> Vec<u32> {
+        match self.spare.pop() {
+            Some(mut v) => {
+                v.resize(n, DistanceField::FAR);
+                v
             }
-            if !refine {
-                for (d, n) in d2s.iter_mut().zip(near.iter()) {
-                    *d = if *n == DistanceField::FAR { far } else { d.sqrt() * spec.cell };
+            None => vec![DistanceField::FAR; n],
+        }
+    }
+
+    pub fn build(&mut self, boundary: &Boundary, band: f32) -> Result<DistanceField> {
+        validate_band(band)?;
+        let spec = boundary.spec;
+        spec.check_memory("distance field", 8)?;
+        let (nx, ny, nz) = (
+            spec.dims.x as usize,
+            spec.dims.y as usize,
+            spec.dims.z as usize,
+        );
+        let nxy = nx * ny;
+        let pts: Vec<Vec3> = boundary
+            .points
+            .par_iter()
+            .map(|&p| spec.to_cell(p))
+            .collect();
+        // Points are in increasing cell index, so their cell z is non-decreasing.
+        let cell_z: Vec<usize> = boundary.cells.iter().map(|&c| c as usize / nxy).collect();
+        let reach = (band + 0.8661).floor() as usize;
+        let a2 = band * band;
+        // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
+        let unset = f32::from_bits(a2.to_bits() + 1);
+        let far = band * spec.cell;
+        let refine = boundary.variant == BoundaryVariant::Closest;
+        // Owning triangles in grid units, for the refinement.
+        let faces: Vec<[Vec3; 3]> = if refine {
+            boundary
+                .faces
+                .par_iter()
+                .map(|f| f.map(|v| spec.to_cell(v)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        let mut dist = self.spare_dist.take().unwrap_or_default();
+        dist.resize(spec.len(), 0.0);
+        let mut nearest = self.buffer_u32(spec.len());
+        dist.par_chunks_mut(nxy * SLAB_LAYERS)
+            .zip(nearest.par_chunks_mut(nxy * SLAB_LAYERS))
+            .enumerate()
+            .for_each(|(slab, (d2s, near))| {
+                let z0 = slab * SLAB_LAYERS;
+                let z1 = (z0 + SLAB_LAYERS).min(nz);
+                d2s.fill(unset);
+                near.fill(DistanceField::FAR);
+                let first = cell_z.partition_point(|&z| z + reach < z0);
+                let last = cell_z.partition_point(|&z| z <= z1 - 1 + reach);
+                for (pi, p) in pts.iter().enumerate().take(last).skip(first) {
+                    splat_point(*p, pi as u32, band, a2, z0, z1, nx, ny, d2s, near);
                 }
-            }
-        });
-    let nearest = if refine {
-        refine_to_faces(&mut dist, &nearest, &faces, (nx, ny, nz), spec.cell, far)
-    } else {
-        nearest
-    };
-    Ok(DistanceField {
-        spec,
-        band,
-        dist,
-        nearest,
-        points: Arc::new(boundary.points.clone()),
-        faces: refine.then(|| Arc::new(boundary.faces.clone())),
-    })
+                if !refine {
+                    for (d, n) in d2s.iter_mut().zip(near.iter()) {
+                        *d = if *n == DistanceField::FAR {
+                            far
+                        } else {
+                            d.sqrt() * spec.cell
+                        };
+                    }
+                }
+            });
+        let nearest = if refine {
+            let mut owner = self.buffer_u32(spec.len());
+            refine_to_faces(
+                &mut dist,
+                &nearest,
+                &mut owner,
+                &faces,
+                (nx, ny, nz),
+                spec.cell,
+                far,
+            );
+            self.spare.push(nearest);
+            owner
+        } else {
+            nearest
+        };
+        Ok(DistanceField {
+            spec,
+            band,
+            dist,
+            nearest,
+            points: Arc::new(boundary.points.clone()),
+            faces: refine.then(|| Arc::new(boundary.faces.clone())),
+        })
+    }
 }
 
 /// The refinement pass: per band cell, the exact distance to the best owning triangle among
-/// its nearest point's and its six neighbours' nearest points'. Returns the new `nearest`
-/// (the point whose triangle won; ties to the smaller index) and writes world distances.
+/// its nearest point's and its six neighbours' nearest points'. Writes the new `nearest`
+/// in `owner` (the point whose triangle won; ties to the smaller index) and writes world
+/// distances.
 fn refine_to_faces(
     dist: &mut [f32],
     nearest: &[u32],
+    owner: &mut [u32],
     faces: &[[Vec3; 3]],
     (nx, ny, nz): (usize, usize, usize),
     cell: f32,
     far: f32,
-) -> Vec<u32> {
+) {
     let nxy = nx * ny;
-    let mut owner = vec![DistanceField::FAR; nearest.len()];
     dist.par_chunks_mut(nxy * SLAB_LAYERS)
         .zip(owner.par_chunks_mut(nxy * SLAB_LAYERS))
         .enumerate()
@@ -106,6 +163,7 @@ fn refine_to_faces(
                 let n0 = nearest[i];
                 if n0 == DistanceField::FAR {
                     dist[k] = far;
+                    owner[k] = DistanceField::FAR;
                     continue;
                 }
                 let (x, y, z) = (i % nx, (i / nx) % ny, i / nxy);
@@ -119,12 +177,24 @@ fn refine_to_faces(
                         m += 1;
                     }
                 };
-                if x > 0 { push(i - 1) }
-                if x + 1 < nx { push(i + 1) }
-                if y > 0 { push(i - nx) }
-                if y + 1 < ny { push(i + nx) }
-                if z > 0 { push(i - nxy) }
-                if z + 1 < nz { push(i + nxy) }
+                if x > 0 {
+                    push(i - 1)
+                }
+                if x + 1 < nx {
+                    push(i + 1)
+                }
+                if y > 0 {
+                    push(i - nx)
+                }
+                if y + 1 < ny {
+                    push(i + nx)
+                }
+                if z > 0 {
+                    push(i - nxy)
+                }
+                if z + 1 < nz {
+                    push(i + nxy)
+                }
                 let mut best = (f32::INFINITY, u32::MAX);
                 for &n in &cands[..m] {
                     let [a, b, c] = faces[n as usize];
@@ -137,7 +207,6 @@ fn refine_to_faces(
                 owner[k] = best.1;
             }
         });
-    owner
 }
 
 /// Writes point `p` (grid units, index `pi`) into the cells of slab [z0, z1) within `band`.
@@ -185,13 +254,14 @@ fn splat_point(
             let row = (z - z0) * nx * ny + y * nx;
             let d_row = &mut d2s[row + xlo..=row + xhi as usize];
             let n_row = &mut near[row + xlo..=row + xhi as usize];
+            // Branch-free select: the compiler turns it into blends, and the many near-equal
+            // candidates of neighbouring points do not cost mispredictions.
             for (k, (d, n)) in d_row.iter_mut().zip(n_row.iter_mut()).enumerate() {
                 let dx = (xlo + k) as f32 - p.x;
                 let d2 = dx * dx + dyz2;
-                if d2 < *d {
-                    *d = d2;
-                    *n = pi;
-                }
+                let closer = d2 < *d;
+                *d = if closer { d2 } else { *d };
+                *n = if closer { pi } else { *n };
             }
         }
     }

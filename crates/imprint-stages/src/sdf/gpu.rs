@@ -8,6 +8,9 @@
 //! included) and squared distances are summed in the CPU's order without fused multiply-adds,
 //! so exact ties, which Centre boundaries make everywhere, are broken the same way.
 //!
+//! For a Closest boundary the last pass refines each band cell as the CPU does: the exact
+//! distance to the best owning triangle of its own and its six neighbours' nearest points.
+//!
 //! The field stays on the GPU ([`GpuField::field`], one `vec4` per cell, H's RGBA layout) for
 //! the stages that read it there; [`GpuField::to_cpu`] is for writers and tests.
 
@@ -26,8 +29,9 @@ pub struct GpuField {
     pub spec: imprint_core::GridSpec,
     /// Half-width of the band, in cells.
     pub band: f32,
-    /// Per cell `vec4<f32>`: xyz = p - x toward the nearest boundary point and w = its distance,
-    /// both in world units; far cells hold (0, 0, 0, band * cell).
+    /// Per cell `vec4<f32>`: xyz = p - x toward the closest boundary point (on the owning
+    /// triangle for a Closest boundary) and w = its distance, both in world units; far cells
+    /// hold (0, 0, 0, band * cell).
     pub field: wgpu::Buffer,
     /// Per cell `u32`: the linear index of the surface cell whose point is nearest, or
     /// [`DistanceField::FAR`]. (Cell indices, not point indices: on the GPU the boundary is
@@ -70,8 +74,9 @@ impl GpuField {
             band: self.band,
             dist,
             nearest,
+            faces: (self.boundary.variant == BoundaryVariant::Closest)
+                .then(|| Arc::new(boundary.faces)),
             points: Arc::new(boundary.points),
-            faces: None,
         })
     }
 }
@@ -90,6 +95,8 @@ struct FieldParams {
     centre: u32,
     zero: u32,
     max_groups: u32,
+    refine: u32,
+    _pad: [u32; 3],
 }
 
 /// The narrow-band field of half-width `band` cells around `boundary`, on the GPU. Submitted,
@@ -122,13 +129,20 @@ pub fn build_field_gpu_timed(
 
     let axis_buf = ctx.storage_buffer("field axis coordinates", &axis_coords)?;
     let best_d2 = ctx.zeroed_buffer("field best d2", spec.len() as u64 * 4)?;
+    let splat_nearest = ctx.zeroed_buffer("field splat nearest", spec.len() as u64 * 4)?;
     let nearest_cell = ctx.zeroed_buffer("field nearest cell", spec.len() as u64 * 4)?;
     let field = ctx.zeroed_buffer("field", spec.len() as u64 * 16)?;
     let surface = ctx.zeroed_buffer("field surface cells", spec.len() as u64 * 4)?;
     let surface_count = ctx.zeroed_buffer("field surface count", 4)?;
     let dispatch_args = ctx.buffer("field dispatch", 12, wgpu::BufferUsages::INDIRECT)?;
 
-    let sources = [shader!("common/dispatch.wgsl"), shader!("sdf/field.wgsl")];
+    let sources = [
+        shader!("common/dispatch.wgsl"),
+        shader!("common/geom.wgsl"),
+        shader!("sdf/field.wgsl"),
+    ];
+    // As on the CPU: Closest boundaries refine to their owning triangles, Centre ones do not.
+    let refine = boundary.variant == BoundaryVariant::Closest;
     let compact = ctx.pipeline("field", &sources, "compact")?;
     let size_dispatch = ctx.pipeline("field", &sources, "size_dispatch")?;
     let scatter = ctx.pipeline("field", &sources, "scatter")?;
@@ -144,6 +158,8 @@ pub fn build_field_gpu_timed(
         centre: (boundary.variant == BoundaryVariant::Centre) as u32,
         zero: 0,
         max_groups: ctx.limits.max_compute_workgroups_per_dimension,
+        refine: refine as u32,
+        _pad: [0; 3],
     };
 
     let mut encoder = ctx
@@ -152,7 +168,7 @@ pub fn build_field_gpu_timed(
             label: Some("distance field"),
         });
     ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
-    ctx.fill_u32(&mut encoder, &nearest_cell, u32::MAX)?;
+    ctx.fill_u32(&mut encoder, &splat_nearest, u32::MAX)?;
     let p0 = ctx.uniform_buffer("field params", &params(0));
     {
         let bind = ctx.bind_group(
@@ -190,7 +206,7 @@ pub fn build_field_gpu_timed(
                 (0, &p),
                 (1, &boundary.points),
                 (2, &best_d2),
-                (3, &nearest_cell),
+                (3, &splat_nearest),
                 (5, &axis_buf),
                 (6, &surface),
                 (7, &surface_count),
@@ -214,8 +230,11 @@ pub fn build_field_gpu_timed(
                 (0, &p0),
                 (1, &boundary.points),
                 (2, &best_d2),
-                (3, &nearest_cell),
+                (3, &splat_nearest),
                 (4, &field),
+                (9, &boundary.owner),
+                (10, &boundary.faces),
+                (11, &nearest_cell),
             ],
         );
         let mut pass = compute_pass(&mut encoder, "field finish", timer.as_deref_mut());

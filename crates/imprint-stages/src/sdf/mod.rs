@@ -8,4 +8,4 @@
 pub mod cpu;
 pub mod gpu;
 
-pub use cpu::build_field_cpu;
+pub use cpu::{FieldBuilder, build_field_cpu};

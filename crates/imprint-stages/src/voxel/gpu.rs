@@ -7,66 +7,116 @@
 //! in between, and each cell keeps the smallest (squared distance, triangle index). Three
 //! passes make that minimum with 32-bit atomics in any thread order (see the shader).
 //!
-//! The result stays on the GPU as a dense per-cell buffer ([`GpuBoundary`]) that the field
+//! Each surface cell also keeps its owning triangle (the one that won the minimum, for both
+//! variants, as on the CPU), which the field refines its distances with.
+//!
+//! The result stays on the GPU as dense per-cell buffers ([`GpuBoundary`]) that the field
 //! stage reads directly; [`GpuBoundary::to_cpu`] compacts it into the CPU's [`Boundary`].
 
 use super::cpu::CELL_HALF;
 use glam::Vec3;
 use imprint_core::{Boundary, BoundaryVariant, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
+use std::sync::Arc;
 
 /// Bytes per cell of the voxeliser's largest buffer (the vec4 points; the limit is per binding).
 const BYTES_PER_CELL: u64 = 16;
+/// Marks a cell with no owning face.
+const NONE: u32 = u32::MAX;
 
-/// A discrete boundary on the GPU: one `vec4<f32>` per grid cell, xyz the boundary point in
-/// grid coordinates (cell centres at integers) and w = 1 for surface cells, 0 elsewhere. Dense
-/// rather than compacted so that the field stage can find a cell's point by its index, and
-/// the order of surface cells is the linear cell order by construction.
+/// A discrete boundary on the GPU, dense rather than compacted so that the field stage finds a
+/// cell's point by its index, and the order of surface cells is the linear cell order by
+/// construction.
 #[derive(Clone, Debug)]
 pub struct GpuBoundary {
     pub spec: GridSpec,
     pub variant: BoundaryVariant,
+    /// Per cell `vec4<f32>`: xyz the boundary point in grid coordinates (cell centres at
+    /// integers), w = 1 for surface cells and 0 elsewhere.
     pub points: wgpu::Buffer,
+    /// Per cell `u32`: index into `faces` of the cell's owning triangle, `u32::MAX` elsewhere.
+    pub owner: wgpu::Buffer,
+    /// Per face three `vec4<f32>`: its vertices in grid coordinates (`GridSpec::to_cell`).
+    pub faces: wgpu::Buffer,
+    /// The same faces in world units, kept on the CPU for [`GpuBoundary::to_cpu`].
+    pub faces_world: Arc<Vec<[Vec3; 3]>>,
+}
+
+/// Grid-coordinate vertices of faces, three `vec4`s each, as the shaders read them.
+fn faces_in_grid(spec: &GridSpec, faces: &[[Vec3; 3]]) -> Vec<[f32; 4]> {
+    faces
+        .iter()
+        .flat_map(|f| f.map(|v| spec.to_cell(v).extend(0.0).to_array()))
+        .collect()
 }
 
 impl GpuBoundary {
-    /// Uploads a CPU boundary (for a GPU field built from a CPU voxelisation). Points go to
-    /// grid coordinates with `GridSpec::to_cell`.
+    /// Uploads a CPU boundary (for a GPU field built from a CPU voxelisation). Points and faces
+    /// go to grid coordinates with `GridSpec::to_cell`, as the CPU field takes them.
     pub fn from_cpu(ctx: &GpuContext, boundary: &Boundary) -> Result<GpuBoundary> {
         let spec = boundary.spec;
-        ctx.check_grid("GPU boundary", spec.dims.to_array(), 16)?;
+        ctx.check_grid("GPU boundary", spec.dims.to_array(), BYTES_PER_CELL)?;
+        let n = boundary.len();
+        if boundary.points.len() != n || !(boundary.faces.is_empty() || boundary.faces.len() == n) {
+            return Err(Error::Invalid(format!(
+                "boundary has {n} cells, {} points and {} faces",
+                boundary.points.len(),
+                boundary.faces.len()
+            )));
+        }
+        if boundary.faces.is_empty() && boundary.variant == BoundaryVariant::Closest {
+            return Err(Error::Invalid(
+                "a Closest boundary needs the owning face of each point".into(),
+            ));
+        }
         let mut dense = vec![[0f32; 4]; spec.len()];
-        for (&c, &p) in boundary.cells.iter().zip(&boundary.points) {
+        let mut owner = vec![NONE; spec.len()];
+        for (k, (&c, &p)) in boundary.cells.iter().zip(&boundary.points).enumerate() {
             let slot = dense
                 .get_mut(c as usize)
                 .ok_or_else(|| Error::Invalid(format!("boundary cell {c} is outside its grid")))?;
             *slot = spec.to_cell(p).extend(1.0).to_array();
+            if !boundary.faces.is_empty() {
+                owner[c as usize] = k as u32;
+            }
         }
         Ok(GpuBoundary {
             spec,
             variant: boundary.variant,
             points: ctx.storage_buffer("boundary points", &dense)?,
+            owner: ctx.storage_buffer("boundary owners", &owner)?,
+            faces: ctx.storage_buffer("boundary faces", &faces_in_grid(&spec, &boundary.faces))?,
+            faces_world: Arc::new(boundary.faces.clone()),
         })
     }
 
     /// Reads the boundary back and compacts it: surface cells in increasing linear index,
-    /// world points computed as the CPU does (`origin + q * cell`).
+    /// world points computed as the CPU does (`origin + q * cell`), owning faces in world units.
     pub fn to_cpu(&self, ctx: &GpuContext) -> Result<Boundary> {
         let dense: Vec<[f32; 4]> = ctx.read_buffer(&self.points)?;
+        let owner: Vec<u32> = ctx.read_buffer(&self.owner)?;
         let mut cells = Vec::new();
         let mut points = Vec::new();
+        let mut faces = Vec::new();
         for (i, p) in dense.iter().take(self.spec.len()).enumerate() {
             if p[3] != 0.0 {
                 cells.push(i as u32);
                 points.push(self.spec.origin + Vec3::new(p[0], p[1], p[2]) * self.spec.cell);
+                if let Some(f) = self.faces_world.get(owner[i] as usize) {
+                    faces.push(*f);
+                }
             }
+        }
+        if faces.len() != cells.len() {
+            // Only an uploaded Centre boundary that came without faces has none.
+            faces.clear();
         }
         Ok(Boundary {
             spec: self.spec,
             variant: self.variant,
             cells,
             points,
-            faces: Vec::new(),
+            faces,
         })
     }
 }
@@ -82,7 +132,9 @@ struct VoxelParams {
     mode: u32,
     variant: u32,
     n_cells: u32,
-    _pad: [u32; 3],
+    /// Always 0: the shaders' guard against fused multiply-adds (`rnd` in common/geom.wgsl).
+    zero: u32,
+    _pad: [u32; 2],
 }
 
 /// The discrete boundary of `mesh` on `spec`, computed on the GPU and left there. The work is
@@ -120,14 +172,10 @@ pub fn voxelize_gpu_timed(
     )?;
 
     // Grid coordinates on the CPU, with the CPU's own function: the same bits on both paths.
-    let verts: Vec<Vec3> = mesh.positions.iter().map(|&p| spec.to_cell(p)).collect();
-    let tris: Vec<[f32; 4]> = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| t.map(|i| verts[i as usize].extend(0.0).to_array()))
+    let faces_world: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
+        .map(|t| mesh.triangle(t))
         .collect();
-
-    let tri_buf = ctx.storage_buffer("voxel triangles", &tris)?;
+    let tri_buf = ctx.storage_buffer("voxel triangles", &faces_in_grid(spec, &faces_world))?;
     let best_d2 = ctx.zeroed_buffer("voxel best d2", spec.len() as u64 * 4)?;
     let best_tri = ctx.zeroed_buffer("voxel best triangle", spec.len() as u64 * 4)?;
     let points = ctx.zeroed_buffer("voxel points", spec.len() as u64 * 16)?;
@@ -149,7 +197,8 @@ pub fn voxelize_gpu_timed(
             BoundaryVariant::Closest => 1,
         },
         n_cells,
-        _pad: [0; 3],
+        zero: 0,
+        _pad: [0; 2],
     };
 
     let mut encoder = ctx
@@ -159,12 +208,8 @@ pub fn voxelize_gpu_timed(
         });
     ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
     ctx.fill_u32(&mut encoder, &best_tri, u32::MAX)?;
-    // Mode 1 only chooses among triangles, which the Centre point does not depend on.
-    let modes: &[u32] = match variant {
-        BoundaryVariant::Centre => &[0],
-        BoundaryVariant::Closest => &[0, 1],
-    };
-    for &mode in modes {
+    // Mode 1 chooses the owning triangle (wanted for the Centre variant too: the CPU records it).
+    for mode in [0, 1] {
         let p = ctx.uniform_buffer("voxel params", &params(mode));
         let bind = ctx.bind_group(
             "voxel touch",
@@ -209,5 +254,8 @@ pub fn voxelize_gpu_timed(
         spec: *spec,
         variant,
         points,
+        owner: best_tri,
+        faces: tri_buf,
+        faces_world: Arc::new(faces_world),
     })
 }
