@@ -37,16 +37,29 @@ impl Machine {
     pub fn detect() -> Self {
         let cpu = std::fs::read_to_string("/proc/cpuinfo")
             .ok()
-            .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+            })
             .unwrap_or_else(|| "unknown CPU".into());
         let load = std::fs::read_to_string("/proc/loadavg")
             .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
             .unwrap_or_else(|_| "unknown".into());
-        Machine { cpu, cores: std::thread::available_parallelism().map_or(1, |n| n.get()), load }
+        Machine {
+            cpu,
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            load,
+        }
     }
 
     pub fn describe(&self) -> String {
-        format!("{} ({} cores visible, {} rayon threads)", self.cpu, self.cores, rayon::current_num_threads())
+        format!(
+            "{} ({} cores visible, {} rayon threads)",
+            self.cpu,
+            self.cores,
+            rayon::current_num_threads()
+        )
     }
 }
 
@@ -77,7 +90,10 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
          imprint time (voxelise + field, Closest variant, table 1). Errors in cells against the \
          exact distance on imprint's band cells.\n"
     );
-    let _ = writeln!(s, "| mesh | imprint ms | OpenVDB ms | OpenVDB / imprint | OpenVDB err p99 / max | imprint err p99 / max | Open3D exact ms | Open3D / imprint |");
+    let _ = writeln!(
+        s,
+        "| mesh | imprint ms | OpenVDB ms | OpenVDB / imprint | OpenVDB err p99 / max | imprint err p99 / max | Open3D exact ms | Open3D / imprint |"
+    );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
     let mut versions = String::new();
     for (name, ours_ms, _mesh, field) in ours {
@@ -86,14 +102,28 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
         let result = tmp.join(format!("{name}.json"));
         std::fs::write(&grid, grid_json(&field.spec)).expect("grid json");
         let d = field.spec.dims;
-        imprint_render::write_npy_f32(&dist, &[d.z as usize, d.y as usize, d.x as usize], &field.dist)
-            .expect("dist npy");
+        imprint_render::write_npy_f32(
+            &dist,
+            &[d.z as usize, d.y as usize, d.x as usize],
+            &field.dist,
+        )
+        .expect("dist npy");
         let mesh_path = root.join(format!("assets/meshes/{name}.obj"));
         let status = std::process::Command::new("python3")
             .arg(&script)
-            .args(["--mesh", mesh_path.to_str().unwrap(), "--grid", grid.to_str().unwrap()])
+            .args([
+                "--mesh",
+                mesh_path.to_str().unwrap(),
+                "--grid",
+                grid.to_str().unwrap(),
+            ])
             .args(["--band", "3", "--dist-npy", dist.to_str().unwrap()])
-            .args(["--repeat", &repeat.to_string(), "--out", result.to_str().unwrap()])
+            .args([
+                "--repeat",
+                &repeat.to_string(),
+                "--out",
+                result.to_str().unwrap(),
+            ])
             .status();
         let json: Option<serde_json::Value> = status
             .ok()
@@ -101,7 +131,11 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
             .and_then(|_| std::fs::read(&result).ok())
             .and_then(|b| serde_json::from_slice(&b).ok());
         let Some(j) = json else {
-            let _ = writeln!(s, "| {name} | {ours_ms:.1} | not run: `python3 {}` failed (run benches/compare/install.sh) | | | | | |", script.display());
+            let _ = writeln!(
+                s,
+                "| {name} | {ours_ms:.1} | not run: `python3 {}` failed (run benches/compare/install.sh) | | | | | |",
+                script.display()
+            );
             continue;
         };
         let vdb = &j["baselines"]["openvdb"];
@@ -109,12 +143,11 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
         let acc = &j["accuracy"];
         let f = |v: &serde_json::Value| v.as_f64();
         let cell = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:.1}"));
-        let ratio = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{:.0}×", x / ours_ms));
-        let err = |k: &str| {
-            match (f(&acc[k]["abs_p99"]), f(&acc[k]["abs_max"])) {
-                (Some(p), Some(m)) => format!("{p:.3} / {m:.3}"),
-                _ => "–".into(),
-            }
+        let ratio =
+            |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{:.0}×", x / ours_ms));
+        let err = |k: &str| match (f(&acc[k]["abs_p99"]), f(&acc[k]["abs_max"])) {
+            (Some(p), Some(m)) => format!("{p:.3} / {m:.3}"),
+            _ => "–".into(),
         };
         let _ = writeln!(
             s,
@@ -156,16 +189,27 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
         }
     };
     let res = if ctx.is_software() { 64 } else { 128 };
-    let repeat = if ctx.is_software() { repeat.min(3) } else { repeat };
+    let repeat = if ctx.is_software() {
+        repeat.min(3)
+    } else {
+        repeat
+    };
     let _ = writeln!(
         s,
         "Adapter: {}{}. Grid {res}³ fitted as in table 1, a = 3, Closest; times are wall clock \
          from submit to completion (median of {repeat}), read-back excluded; error of the read-back \
          field against the exact distance.\n",
         ctx.adapter_name(),
-        if ctx.is_software() { " (software Vulkan: correct, not fast; not a GPU figure)" } else { "" }
+        if ctx.is_software() {
+            " (software Vulkan: correct, not fast; not a GPU figure)"
+        } else {
+            ""
+        }
     );
-    let _ = writeln!(s, "| mesh | voxelise ms | field ms | total ms | CPU total ms (same grid) | p99 err | max err |");
+    let _ = writeln!(
+        s,
+        "| mesh | voxelise ms | field ms | total ms | CPU total ms (same grid) | p99 err | max err |"
+    );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
     for name in ["teapot", "stanford-bunny", "cow"] {
         let mesh = Mesh::load_obj(&root.join(format!("assets/meshes/{name}.obj"))).expect("mesh");
@@ -199,7 +243,11 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
             }
         }
         let Some(field) = last.filter(|_| failed.is_none()) else {
-            let _ = writeln!(s, "| {name} | failed: {} | | | | | |", failed.map_or(String::new(), |e| e.to_string()));
+            let _ = writeln!(
+                s,
+                "| {name} | failed: {} | | | | | |",
+                failed.map_or(String::new(), |e| e.to_string())
+            );
             continue;
         };
         // Drop the warm-up run.
@@ -217,9 +265,17 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
                 std::hint::black_box(imprint_stages::sdf::build_field_cpu(&b, 3.0).expect("field"));
             })
         };
-        let err = field.to_cpu(ctx).map(|f| imprint_stages::metrics::field_error(&f, &mesh));
-        let (p99, max) = err.map_or(("–".into(), "–".into()), |e| (format!("{:.3}", e.p99), format!("{:.3}", e.max)));
-        let _ = writeln!(s, "| {name} | {v:.2} | {f:.2} | {:.2} | {cpu:.2} | {p99} | {max} |", v + f);
+        let err = field
+            .to_cpu(ctx)
+            .map(|f| imprint_stages::metrics::field_error(&f, &mesh));
+        let (p99, max) = err.map_or(("–".into(), "–".into()), |e| {
+            (format!("{:.3}", e.p99), format!("{:.3}", e.max))
+        });
+        let _ = writeln!(
+            s,
+            "| {name} | {v:.2} | {f:.2} | {:.2} | {cpu:.2} | {p99} | {max} |",
+            v + f
+        );
     }
     s
 }

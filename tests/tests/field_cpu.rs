@@ -43,7 +43,10 @@ fn plane_distance_is_exact_with_closest_points() {
         if exact <= 2.9 {
             assert!(!f.is_far(i), "cell {i} at {exact} cells left far");
             let got = f.dist[i] / spec.cell;
-            assert!((got - exact).abs() < 2e-4, "cell {i}: {got} vs exact {exact}");
+            assert!(
+                (got - exact).abs() < 2e-4,
+                "cell {i}: {got} vs exact {exact}"
+            );
             // The vector points to the plane along -n or +n with the same length.
             let v = f.vector(i) / spec.cell;
             assert!((v.length() - exact).abs() < 2e-4);
@@ -60,7 +63,10 @@ fn plane_distance_is_exact_with_closest_points() {
     let p = p0 + n * 1.37 * spec.cell + Vec3::new(0.013, -0.007, 0.0);
     let exact = (p - p0).dot(n).abs();
     let a = f.sample(p, Sampling::Vector);
-    assert!(a.in_band && (a.distance - exact).abs() < 1e-4 * spec.cell, "{a:?} vs {exact}");
+    assert!(
+        a.in_band && (a.distance - exact).abs() < 1e-4 * spec.cell,
+        "{a:?} vs {exact}"
+    );
 }
 
 #[test]
@@ -121,7 +127,10 @@ fn open_meshes_meet_the_p99_goal() {
         let e = field_error(&f, &m);
         assert!(e.band_cells > 10_000, "{name}: {e:?}");
         assert!(e.far_fraction < 0.02, "{name}: {e:?}");
-        assert!(e.p99 <= 0.1 && e.max <= 0.6 && e.median < 1e-3, "{name}: {e:?}");
+        assert!(
+            e.p99 <= 0.1 && e.max <= 0.6 && e.median < 1e-3,
+            "{name}: {e:?}"
+        );
     }
 }
 
@@ -133,7 +142,10 @@ fn assert_same_field(a: &DistanceField, b: &DistanceField, tol: f32, what: &str)
         if a.is_far(i) != b.is_far(i) {
             // Only cells right at the band edge may differ by rounding.
             let d = a.dist[i].min(b.dist[i]) / a.spec.cell;
-            assert!((d - a.band).abs() < 1e-3, "{what}: cell {i} band differs at {d} cells");
+            assert!(
+                (d - a.band).abs() < 1e-3,
+                "{what}: cell {i} band differs at {d} cells"
+            );
             band_diff += 1;
             continue;
         }
@@ -158,8 +170,14 @@ fn flipped_duplicated_and_unwelded_triangles_give_the_same_field() {
     // results stay within the method's own error, far below the p99 goal of 0.1 cell.
     let f = field(&flipped, &spec, BoundaryVariant::Closest, 2.5);
     assert_same_field(&base, &f, 0.05, "flipped");
-    let same = (0..f.dist.len()).filter(|&i| (f.dist[i] - base.dist[i]).abs() < 1e-4 * spec.cell).count();
-    assert!(same as f64 > 0.999 * f.dist.len() as f64, "{same} of {}", f.dist.len());
+    let same = (0..f.dist.len())
+        .filter(|&i| (f.dist[i] - base.dist[i]).abs() < 1e-4 * spec.cell)
+        .count();
+    assert!(
+        same as f64 > 0.999 * f.dist.len() as f64,
+        "{same} of {}",
+        f.dist.len()
+    );
 
     let mut doubled = m.clone();
     let tris = doubled.triangles.clone();
@@ -196,14 +214,20 @@ fn degenerate_triangles_are_harmless() {
     // They lie on the surface (vertices and edges), so the field does not get worse.
     let e = field_error(&f, &m);
     let e0 = field_error(&base, &m);
-    assert!(e.max <= e0.max + 1e-5 && e.p99 <= e0.p99 + 1e-5, "{e:?} vs {e0:?}");
+    assert!(
+        e.max <= e0.max + 1e-5 && e.p99 <= e0.p99 + 1e-5,
+        "{e:?} vs {e0:?}"
+    );
 }
 
 #[test]
 fn triangles_on_grid_planes_leave_no_gaps() {
     // A box whose faces lie exactly on cell faces (x = 2.5, 10.5 …) and on cell centres.
     let spec = GridSpec::new(Vec3::ZERO, 1.0, UVec3::splat(16)).unwrap();
-    for (lo, hi) in [(Vec3::splat(2.5), Vec3::splat(10.5)), (Vec3::splat(3.0), Vec3::splat(11.0))] {
+    for (lo, hi) in [
+        (Vec3::splat(2.5), Vec3::splat(10.5)),
+        (Vec3::splat(3.0), Vec3::splat(11.0)),
+    ] {
         let half = (hi - lo) / 2.0;
         let mut m = primitives::cuboid(half, 3);
         m.transform(glam::Mat4::from_translation((lo + hi) / 2.0));
@@ -211,7 +235,10 @@ fn triangles_on_grid_planes_leave_no_gaps() {
         // Exactly the cells whose closed box touches the box's surface.
         let touches = |c: UVec3| {
             let x = c.as_vec3();
-            let cell = Aabb { min: x - 0.5, max: x + 0.5 };
+            let cell = Aabb {
+                min: x - 0.5,
+                max: x + 0.5,
+            };
             let inter_min = cell.min.max(lo);
             let inter_max = cell.max.min(hi);
             let overlaps = inter_min.cmple(inter_max).all();
@@ -271,7 +298,11 @@ fn boundary_points_scale_with_area_not_triangle_count() {
     let coarse = primitives::uv_sphere(0.5, 64, 32);
     let fine = primitives::uv_sphere(0.5, 256, 128);
     let spec = GridSpec::fit(&coarse.bounds(), 64, 0.1).unwrap();
-    let a = voxelize_cpu(&coarse, &spec, BoundaryVariant::Closest).unwrap().len() as f32;
-    let b = voxelize_cpu(&fine, &spec, BoundaryVariant::Closest).unwrap().len() as f32;
+    let a = voxelize_cpu(&coarse, &spec, BoundaryVariant::Closest)
+        .unwrap()
+        .len() as f32;
+    let b = voxelize_cpu(&fine, &spec, BoundaryVariant::Closest)
+        .unwrap()
+        .len() as f32;
     assert!((a - b).abs() / b < 0.02, "{a} vs {b}");
 }

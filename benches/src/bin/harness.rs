@@ -19,7 +19,12 @@ use std::path::PathBuf;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let arg = |k: &str| args.iter().position(|a| a == k).and_then(|i| args.get(i + 1)).cloned();
+    let arg = |k: &str| {
+        args.iter()
+            .position(|a| a == k)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
     let repeat: usize = arg("--repeat").map_or(15, |s| s.parse().expect("--repeat N"));
     let out = PathBuf::from(arg("--out").unwrap_or_else(|| "BENCHMARKS.md".into()));
     let skip_baselines = args.iter().any(|a| a == "--no-baselines");
@@ -49,7 +54,11 @@ fn main() {
     )
     .unwrap();
     writeln!(md, "| mesh | triangles | variant | boundary points | voxelise ms | field ms | total ms | band cells | p99 err | max err | median err | far |").unwrap();
-    writeln!(md, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|").unwrap();
+    writeln!(
+        md,
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    )
+    .unwrap();
     let mut totals = Vec::new();
     for name in ["teapot", "stanford-bunny", "cow"] {
         let mesh = load(&root, name);
@@ -70,8 +79,16 @@ fn main() {
     }
 
     // (2) Same shape, more triangles.
-    writeln!(md, "\n## 2. One shape at 10k, 100k and 1M triangles (sphere, 128³, a = 3, Closest)\n").unwrap();
-    writeln!(md, "| triangles | boundary points | voxelise ms | field ms | p99 err | max err |").unwrap();
+    writeln!(
+        md,
+        "\n## 2. One shape at 10k, 100k and 1M triangles (sphere, 128³, a = 3, Closest)\n"
+    )
+    .unwrap();
+    writeln!(
+        md,
+        "| triangles | boundary points | voxelise ms | field ms | p99 err | max err |"
+    )
+    .unwrap();
     writeln!(md, "|---:|---:|---:|---:|---:|---:|").unwrap();
     for (seg, rings) in [(100u32, 51u32), (317, 159), (1000, 501)] {
         let mesh = primitives::uv_sphere(0.5, seg, rings);
@@ -79,14 +96,23 @@ fn main() {
         writeln!(
             md,
             "| {} | {} | {:.2} | {:.2} | {:.3} | {:.3} |",
-            mesh.triangles.len(), r.points, r.voxelise_ms, r.field_ms, r.error.p99, r.error.max
+            mesh.triangles.len(),
+            r.points,
+            r.voxelise_ms,
+            r.field_ms,
+            r.error.p99,
+            r.error.max
         )
         .unwrap();
         eprintln!("table 2: {} triangles done", mesh.triangles.len());
     }
 
     // (3) Baselines.
-    writeln!(md, "\n## 3. Against what users would pick instead (same meshes, same grid, same run)\n").unwrap();
+    writeln!(
+        md,
+        "\n## 3. Against what users would pick instead (same meshes, same grid, same run)\n"
+    )
+    .unwrap();
     if skip_baselines {
         writeln!(md, "Skipped (--no-baselines).").unwrap();
     } else {
@@ -107,7 +133,9 @@ fn measure(mesh: &Mesh, res: u32, band: f32, variant: BoundaryVariant, repeat: u
     let spec = GridSpec::fit(&mesh.bounds(), res, 0.1).expect("grid");
     let mut vox = Voxelizer::new(spec).expect("voxeliser");
     let mut boundary = vox.run(mesh, variant).expect("voxelise");
-    let voxelise_ms = median_ms(repeat, || boundary = vox.run(mesh, variant).expect("voxelise"));
+    let voxelise_ms = median_ms(repeat, || {
+        boundary = vox.run(mesh, variant).expect("voxelise")
+    });
     // Steady state of a frame-by-frame run: the builder reuses the last field's buffers.
     let mut builder = FieldBuilder::default();
     let mut field = builder.build(&boundary, band).expect("field");

@@ -14,7 +14,11 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "imprint", version, about = "How deforming bodies touch soft things: distance fields, cloth, snow, ground")]
+#[command(
+    name = "imprint",
+    version,
+    about = "How deforming bodies touch soft things: distance fields, cloth, snow, ground"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -128,11 +132,12 @@ fn main() -> ExitCode {
 fn report_error(e: &Error) {
     match e {
         Error::Pipeline(p) => {
-            let handler = miette::GraphicalReportHandler::new_themed(if std::io::stderr().is_terminal() {
-                miette::GraphicalTheme::unicode()
-            } else {
-                miette::GraphicalTheme::unicode_nocolor()
-            });
+            let handler =
+                miette::GraphicalReportHandler::new_themed(if std::io::stderr().is_terminal() {
+                    miette::GraphicalTheme::unicode()
+                } else {
+                    miette::GraphicalTheme::unicode_nocolor()
+                });
             let mut s = String::new();
             let _ = handler.render_report(&mut s, p.as_ref());
             eprintln!("error: {s}");
@@ -143,7 +148,13 @@ fn report_error(e: &Error) {
 
 fn execute(cmd: Command) -> imprint_graph::Result<()> {
     match cmd {
-        Command::Run { file, out, frames, backend, sets } => {
+        Command::Run {
+            file,
+            out,
+            frames,
+            backend,
+            sets,
+        } => {
             let plan = imprint_graph::load(&file, &sets)?;
             run_plan(&plan, out, frames, backend.map(Into::into))
         }
@@ -157,10 +168,21 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             print!("{}", plan.dot());
             Ok(())
         }
-        Command::Field { mesh, resolution, band, padding, variant, backend, out } => {
+        Command::Field {
+            mesh,
+            resolution,
+            band,
+            padding,
+            variant,
+            backend,
+            out,
+        } => {
             let text = field_pipeline(&mesh, resolution, band, padding, variant)?;
             let plan = imprint_graph::parse(
-                imprint_graph::diagnostics::Source { name: "imprint field".into(), text },
+                imprint_graph::diagnostics::Source {
+                    name: "imprint field".into(),
+                    text,
+                },
                 Path::new("."),
             )?;
             run_plan(&plan, out, None, backend.map(Into::into))
@@ -168,14 +190,25 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
     }
 }
 
-fn run_plan(plan: &Plan, out: PathBuf, frames: Option<Range<u32>>, backend: Option<Backend>) -> imprint_graph::Result<()> {
-    let opts = RunOptions { out: out.clone(), frames, backend };
+fn run_plan(
+    plan: &Plan,
+    out: PathBuf,
+    frames: Option<Range<u32>>,
+    backend: Option<Backend>,
+) -> imprint_graph::Result<()> {
+    let opts = RunOptions {
+        out: out.clone(),
+        frames,
+        backend,
+    };
     let bar = ProgressBar::new(0);
     if std::io::stderr().is_terminal() {
         bar.set_style(
-            ProgressStyle::with_template("{spinner} frame {pos}/{len} [{bar:30}] {elapsed} ETA {eta}")
-                .expect("valid template")
-                .progress_chars("=> "),
+            ProgressStyle::with_template(
+                "{spinner} frame {pos}/{len} [{bar:30}] {elapsed} ETA {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
         );
     } else {
         bar.set_draw_target(ProgressDrawTarget::hidden());
@@ -186,14 +219,28 @@ fn run_plan(plan: &Plan, out: PathBuf, frames: Option<Range<u32>>, backend: Opti
     })?;
     bar.finish_and_clear();
     println!("{}", report.table(&plan.order));
-    println!("{} file(s) written; report: {}", report.files_written, out.join("report.json").display());
+    println!(
+        "{} file(s) written; report: {}",
+        report.files_written,
+        out.join("report.json").display()
+    );
     Ok(())
 }
 
 /// The pipeline `imprint field` runs: the same nodes and checks a user's file gets.
-fn field_pipeline(mesh: &Path, resolution: u32, band: f32, padding: f32, variant: VariantArg) -> imprint_graph::Result<String> {
+fn field_pipeline(
+    mesh: &Path,
+    resolution: u32,
+    band: f32,
+    padding: f32,
+    variant: VariantArg,
+) -> imprint_graph::Result<String> {
     let abs = std::path::absolute(mesh).map_err(|e| imprint_core::Error::io(mesh, e))?;
-    let path = abs.display().to_string().replace('\\', "\\\\").replace('"', "\\\"");
+    let path = abs
+        .display()
+        .to_string()
+        .replace('\\', "\\\\")
+        .replace('"', "\\\"");
     let variant = match variant {
         VariantArg::Closest => "Closest",
         VariantArg::Centre => "Centre",
@@ -223,7 +270,9 @@ fn describe(plan: &Plan) -> String {
         let node = &f.nodes[name];
         let when = if node.is_writer() {
             match node {
-                imprint_graph::schema::NodeSpec::WriteField(w) if w.every > 1 => format!("every {} frames", w.every),
+                imprint_graph::schema::NodeSpec::WriteField(w) if w.every > 1 => {
+                    format!("every {} frames", w.every)
+                }
                 _ => "every frame".into(),
             }
         } else if statics.contains(name) {
@@ -231,13 +280,21 @@ fn describe(plan: &Plan) -> String {
         } else {
             "every frame".into()
         };
-        let inputs: Vec<String> = node.inputs().iter().map(|(p, n, t)| format!("{p}={n} ({t})")).collect();
+        let inputs: Vec<String> = node
+            .inputs()
+            .iter()
+            .map(|(p, n, t)| format!("{p}={n} ({t})"))
+            .collect();
         s += &format!(
             "  {:<16} {:<14} {:<40} {}\n",
             name,
             node.kind(),
             when,
-            if inputs.is_empty() { String::new() } else { format!("<- {}", inputs.join(", ")) }
+            if inputs.is_empty() {
+                String::new()
+            } else {
+                format!("<- {}", inputs.join(", "))
+            }
         );
     }
     if plan.pruned.is_empty() {
@@ -258,7 +315,13 @@ fn static_nodes(plan: &Plan) -> Vec<String> {
         let node = &plan.file.nodes[name];
         let is_static = match node {
             imprint_graph::schema::NodeSpec::Mesh(m) => m.motion.is_empty(),
-            _ => !node.inputs().is_empty() && node.inputs().iter().all(|(_, i, _)| out.iter().any(|o| o == i)),
+            _ => {
+                !node.inputs().is_empty()
+                    && node
+                        .inputs()
+                        .iter()
+                        .all(|(_, i, _)| out.iter().any(|o| o == i))
+            }
         };
         if is_static {
             out.push(name.clone());

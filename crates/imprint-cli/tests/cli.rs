@@ -19,7 +19,9 @@ fn assets() -> PathBuf {
 
 /// A pipeline around one mesh file, written into `dir`.
 fn pipeline(dir: &Path, nodes: &str) -> PathBuf {
-    let text = format!("Pipeline(\n    frames: 2,\n    backend: Cpu,\n    nodes: {{\n{nodes}\n    }},\n)\n");
+    let text = format!(
+        "Pipeline(\n    frames: 2,\n    backend: Cpu,\n    nodes: {{\n{nodes}\n    }},\n)\n"
+    );
     let p = dir.join("p.ron");
     std::fs::write(&p, text).unwrap();
     p
@@ -82,13 +84,26 @@ fn unknown_field() {
 #[test]
 fn input_that_names_no_node() {
     let nodes = good_nodes(&teapot()).replace("boundary: \"vox\"", "boundary: \"voxx\"");
-    expect_invalid(&nodes, &["'voxx', which is not a node", "did you mean 'vox'", "p.ron:7:"]);
+    expect_invalid(
+        &nodes,
+        &[
+            "'voxx', which is not a node",
+            "did you mean 'vox'",
+            "p.ron:7:",
+        ],
+    );
 }
 
 #[test]
 fn type_mismatch_names_the_port_and_types() {
     let nodes = good_nodes(&teapot()).replace("boundary: \"vox\"", "boundary: \"m\"");
-    expect_invalid(&nodes, &["input 'boundary' expects a Boundary", "'m' (Mesh) produces a Mesh"]);
+    expect_invalid(
+        &nodes,
+        &[
+            "input 'boundary' expects a Boundary",
+            "'m' (Mesh) produces a Mesh",
+        ],
+    );
 }
 
 #[test]
@@ -103,22 +118,40 @@ fn cycle_names_its_nodes() {
 #[test]
 fn missing_asset_file() {
     let nodes = good_nodes("no/such/bunny.obj");
-    expect_invalid(&nodes, &["mesh file not found", "no/such/bunny.obj", "p.ron:5:"]);
+    expect_invalid(
+        &nodes,
+        &["mesh file not found", "no/such/bunny.obj", "p.ron:5:"],
+    );
 }
 
 #[test]
 fn values_out_of_range() {
     let t = teapot();
-    expect_invalid(&good_nodes(&t).replace("resolution: 24", "resolution: 0"), &["resolution must be at least 1"]);
-    expect_invalid(&good_nodes(&t).replace("band: 2.5", "band: -1"), &["band must be a finite number of cells > 0"]);
-    expect_invalid(&good_nodes(&t).replace("band: 2.5", "band: NaN"), &["band must be a finite number"]);
-    expect_invalid(&good_nodes(&t).replace("period: 1.0", "period: -2.0"), &["period"]);
+    expect_invalid(
+        &good_nodes(&t).replace("resolution: 24", "resolution: 0"),
+        &["resolution must be at least 1"],
+    );
+    expect_invalid(
+        &good_nodes(&t).replace("band: 2.5", "band: -1"),
+        &["band must be a finite number of cells > 0"],
+    );
+    expect_invalid(
+        &good_nodes(&t).replace("band: 2.5", "band: NaN"),
+        &["band must be a finite number"],
+    );
+    expect_invalid(
+        &good_nodes(&t).replace("period: 1.0", "period: -2.0"),
+        &["period"],
+    );
 }
 
 #[test]
 fn a_huge_grid_is_refused_before_allocating() {
     let c = case(&good_nodes(&teapot()).replace("resolution: 24", "resolution: 100000"));
-    let out = imprint(&["run", c.file.to_str().unwrap(), "--out", "o"], c.dir.path());
+    let out = imprint(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("would need") && err.contains("PiB"), "{err}");
@@ -130,18 +163,27 @@ fn run_with_mesh_text(obj: &str) -> (Option<i32>, String) {
     std::fs::write(dir.path().join("bad.obj"), obj).unwrap();
     let file = pipeline(dir.path(), &good_nodes("bad.obj"));
     let out = imprint(&["run", file.to_str().unwrap(), "--out", "o"], dir.path());
-    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 #[test]
 fn bad_meshes_name_the_file_and_the_problem() {
     let (code, err) = run_with_mesh_text("# nothing here\nv 0 0 0\n");
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("bad.obj") && err.contains("no triangles"), "{err}");
+    assert!(
+        err.contains("bad.obj") && err.contains("no triangles"),
+        "{err}"
+    );
 
     let (code, err) = run_with_mesh_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n");
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("bad.obj") && err.contains("vertex 3") && err.contains("non-finite"), "{err}");
+    assert!(
+        err.contains("bad.obj") && err.contains("vertex 3") && err.contains("non-finite"),
+        "{err}"
+    );
 
     let (code, err) = run_with_mesh_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
     assert_eq!(code, Some(2), "{err}");
@@ -172,14 +214,30 @@ fn check_lists_what_runs_and_what_is_pruned() {
     let out = imprint(&["check", c.file.to_str().unwrap()], c.dir.path());
     assert_eq!(out.status.code(), Some(0));
     let s = String::from_utf8_lossy(&out.stdout);
-    assert!(s.contains("unused") && s.contains("its output reaches no writer"), "{s}");
-    let order: Vec<usize> = ["  m ", "  vox ", "  field ", "  out "].iter().map(|n| s.find(n).unwrap()).collect();
-    assert!(order.windows(2).all(|w| w[0] < w[1]), "dependency order: {s}");
+    assert!(
+        s.contains("unused") && s.contains("its output reaches no writer"),
+        "{s}"
+    );
+    let order: Vec<usize> = ["  m ", "  vox ", "  field ", "  out "]
+        .iter()
+        .map(|n| s.find(n).unwrap())
+        .collect();
+    assert!(
+        order.windows(2).all(|w| w[0] < w[1]),
+        "dependency order: {s}"
+    );
 
     let out = imprint(&["graph", c.file.to_str().unwrap(), "--dot"], c.dir.path());
     let dot = String::from_utf8_lossy(&out.stdout);
-    assert!(dot.starts_with("digraph") && dot.contains("\"vox\" -> \"field\" [label=\"boundary: Boundary\"]"), "{dot}");
-    assert!(dot.contains("\"unused\"") && dot.contains("dashed"), "{dot}");
+    assert!(
+        dot.starts_with("digraph")
+            && dot.contains("\"vox\" -> \"field\" [label=\"boundary: Boundary\"]"),
+        "{dot}"
+    );
+    assert!(
+        dot.contains("\"unused\"") && dot.contains("dashed"),
+        "{dot}"
+    );
 }
 
 #[test]
@@ -187,8 +245,23 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
     let c = case(&good_nodes(&teapot()));
     let f = c.file.to_str().unwrap();
     for out_dir in ["o1", "o2"] {
-        let out = imprint(&["run", f, "--out", out_dir, "--set", "vox.grid.resolution=20"], c.dir.path());
-        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = imprint(
+            &[
+                "run",
+                f,
+                "--out",
+                out_dir,
+                "--set",
+                "vox.grid.resolution=20",
+            ],
+            c.dir.path(),
+        );
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
     let d = c.dir.path();
     for frame in ["0000", "0001"] {
@@ -207,10 +280,14 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
     assert_eq!(field["backend"], "cpu");
     let err = &field["metrics"]["error_cells"];
     // A 20-cell grid is coarse; the accuracy goal itself is tested in tests/field_cpu.rs.
-    assert!(err["p99"].as_f64().unwrap() < 0.35 && err["max"].as_f64().unwrap() < 1.0, "{err}");
+    assert!(
+        err["p99"].as_f64().unwrap() < 0.35 && err["max"].as_f64().unwrap() < 1.0,
+        "{err}"
+    );
     assert!(err["far_fraction"].as_f64().unwrap() < 0.05, "{err}");
     let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("o1/out/field_0000_field.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(d.join("o1/out/field_0000_field.json")).unwrap())
+            .unwrap();
     assert_eq!(meta["dims"][0], 20);
 }
 
@@ -219,13 +296,38 @@ fn field_command_computes_one_mesh() {
     let dir = tempfile::tempdir().unwrap();
     let mesh = assets().join("suzanne.obj");
     let out = imprint(
-        &["field", mesh.to_str().unwrap(), "--resolution", "24", "--band", "2", "--backend", "cpu", "--out", "f"],
+        &[
+            "field",
+            mesh.to_str().unwrap(),
+            "--resolution",
+            "24",
+            "--band",
+            "2",
+            "--backend",
+            "cpu",
+            "--out",
+            "f",
+        ],
         dir.path(),
     );
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("f/field_0000_field.json")).unwrap()).unwrap();
-    assert_eq!(meta["dims"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).max(), Some(24));
+        serde_json::from_slice(&std::fs::read(dir.path().join("f/field_0000_field.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        meta["dims"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .max(),
+        Some(24)
+    );
     assert_eq!(meta["band"], 2.0);
     assert!(dir.path().join("f/report.json").is_file());
     let out = imprint(&["field", "nope.obj"], dir.path());

@@ -32,7 +32,9 @@ pub struct Closest {
 
 impl Bvh {
     pub fn new(mesh: &Mesh) -> Self {
-        let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len()).map(|t| mesh.triangle(t)).collect();
+        let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
+            .map(|t| mesh.triangle(t))
+            .collect();
         let centroids: Vec<Vec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF_SIZE + 1);
@@ -84,7 +86,8 @@ impl Bvh {
 
     /// The exact closest point on the mesh to `p`.
     pub fn closest(&self, p: Vec3) -> Closest {
-        self.closest_within(p, f32::INFINITY).expect("mesh is not empty")
+        self.closest_within(p, f32::INFINITY)
+            .expect("mesh is not empty")
     }
 
     /// The exact closest point on the mesh to `p` if it is within `max_distance`.

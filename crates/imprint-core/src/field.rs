@@ -99,7 +99,10 @@ impl DistanceField {
     pub fn vector(&self, index: usize) -> Vec3 {
         match self.nearest[index] {
             Self::FAR => Vec3::ZERO,
-            n => self.closest_point(n as usize, self.spec.center(self.spec.coords(index))) - self.spec.center(self.spec.coords(index)),
+            n => {
+                self.closest_point(n as usize, self.spec.center(self.spec.coords(index)))
+                    - self.spec.center(self.spec.coords(index))
+            }
         }
     }
 

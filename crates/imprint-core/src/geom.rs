@@ -3,6 +3,22 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+/// `x.floor()` as an integer, inlined: baseline x86-64 has no rounding instruction, so the
+/// library `floorf` is a call, and range computations in the hot loops pay it per row.
+/// Exact for |x| < 2^31.
+#[inline(always)]
+pub fn floor_i(x: f32) -> i32 {
+    let i = x as i32;
+    if (i as f32) > x { i - 1 } else { i }
+}
+
+/// `x.ceil()` as an integer, inlined (see [`floor_i`]).
+#[inline(always)]
+pub fn ceil_i(x: f32) -> i32 {
+    let i = x as i32;
+    if (i as f32) < x { i + 1 } else { i }
+}
+
 /// Axis-aligned box. `empty()` is the identity for `grow`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
@@ -179,13 +195,36 @@ mod tests {
     use super::*;
 
     #[test]
+    fn integer_floor_and_ceil_match_std() {
+        for x in [
+            -3.5f32,
+            -3.0,
+            -2.999,
+            -0.2,
+            -0.0,
+            0.0,
+            0.2,
+            1.0,
+            1.0001,
+            7.5,
+            1e6 + 0.5,
+        ] {
+            assert_eq!(floor_i(x), x.floor() as i32, "{x}");
+            assert_eq!(ceil_i(x), x.ceil() as i32, "{x}");
+        }
+    }
+
+    #[test]
     fn closest_point_regions() {
         let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
         // Face interior: projection.
         let q = closest_point_on_triangle(Vec3::new(0.25, 0.25, 2.0), a, b, c);
         assert!((q - Vec3::new(0.25, 0.25, 0.0)).length() < 1e-6);
         // Vertex region.
-        assert_eq!(closest_point_on_triangle(Vec3::new(-1.0, -1.0, 0.5), a, b, c), a);
+        assert_eq!(
+            closest_point_on_triangle(Vec3::new(-1.0, -1.0, 0.5), a, b, c),
+            a
+        );
         // Edge region (hypotenuse).
         let q = closest_point_on_triangle(Vec3::new(1.0, 1.0, 0.0), a, b, c);
         assert!((q - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);

@@ -26,7 +26,9 @@ impl GridSpec {
     /// An explicit grid, validated.
     pub fn new(origin: Vec3, cell: f32, dims: UVec3) -> Result<Self> {
         if !origin.is_finite() {
-            return Err(Error::Invalid(format!("grid origin {origin} is not finite")));
+            return Err(Error::Invalid(format!(
+                "grid origin {origin} is not finite"
+            )));
         }
         if !(cell.is_finite() && cell > 0.0) {
             return Err(Error::Invalid(format!(
@@ -61,7 +63,9 @@ impl GridSpec {
             )));
         }
         if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Err(Error::Invalid("cannot fit a grid around an empty box".into()));
+            return Err(Error::Invalid(
+                "cannot fit a grid around an empty box".into(),
+            ));
         }
         let size = bounds.size();
         let longest = size.max_element().max(f32::MIN_POSITIVE * 1e6);

@@ -42,8 +42,8 @@ impl Mesh {
             single_index: true,
             ..Default::default()
         };
-        let (models, _materials) =
-            tobj::load_obj(path, &opts).map_err(|e| Error::mesh(path, format!("not a readable OBJ file ({e})")))?;
+        let (models, _materials) = tobj::load_obj(path, &opts)
+            .map_err(|e| Error::mesh(path, format!("not a readable OBJ file ({e})")))?;
         let mut positions = Vec::new();
         let mut triangles = Vec::new();
         let mut normals = Vec::new();
@@ -54,9 +54,17 @@ impl Mesh {
             let m = &model.mesh;
             let base = positions.len() as u32;
             let n = m.positions.len() / 3;
-            positions.extend(m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+            positions.extend(
+                m.positions
+                    .chunks_exact(3)
+                    .map(|p| Vec3::new(p[0], p[1], p[2])),
+            );
             if m.normals.len() == m.positions.len() {
-                normals.extend(m.normals.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+                normals.extend(
+                    m.normals
+                        .chunks_exact(3)
+                        .map(|p| Vec3::new(p[0], p[1], p[2])),
+                );
             } else {
                 all_have_normals = false;
             }
@@ -80,7 +88,10 @@ impl Mesh {
                 Error::Invalid(problem) => Error::mesh(path, problem),
                 other => other,
             })?;
-        if all_have_normals && normals.len() == mesh.positions.len() && normals.iter().all(|n| n.is_finite()) {
+        if all_have_normals
+            && normals.len() == mesh.positions.len()
+            && normals.iter().all(|n| n.is_finite())
+        {
             mesh.normals = normals.iter().map(|n| n.normalize_or_zero()).collect();
         } else {
             mesh.compute_normals();
@@ -98,7 +109,12 @@ impl Mesh {
                 self.positions.len()
             )));
         }
-        if let Some((i, p)) = self.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+        if let Some((i, p)) = self
+            .positions
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.is_finite())
+        {
             return Err(bad(format!(
                 "vertex {} has a non-finite coordinate ({}, {}, {})",
                 i + 1,
@@ -108,7 +124,12 @@ impl Mesh {
             )));
         }
         let n = self.positions.len() as u32;
-        if let Some((f, t)) = self.triangles.iter().enumerate().find(|(_, t)| t.iter().any(|&i| i >= n)) {
+        if let Some((f, t)) = self
+            .triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&i| i >= n))
+        {
             return Err(bad(format!(
                 "triangle {} uses vertex index {} but the mesh has {} vertices",
                 f + 1,
@@ -175,7 +196,9 @@ impl Mesh {
         let b = self.bounds();
         let longest = b.size().max_element();
         let s = if longest > 0.0 { size / longest } else { 1.0 };
-        Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(s)) * Mat4::from_translation(-b.center())
+        Mat4::from_translation(center)
+            * Mat4::from_scale(Vec3::splat(s))
+            * Mat4::from_translation(-b.center())
     }
 
     /// Appends another mesh (a union of surfaces; no welding).
@@ -183,8 +206,12 @@ impl Mesh {
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
-        self.triangles
-            .extend(other.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+        self.triangles.extend(
+            other
+                .triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
         self.uvs = None;
     }
 }
@@ -215,7 +242,12 @@ pub mod primitives {
         }
         for r in 1..rings - 1 {
             for s in 0..segments {
-                let (a, b, c, d) = (ring(r, s), ring(r, s + 1), ring(r + 1, s), ring(r + 1, s + 1));
+                let (a, b, c, d) = (
+                    ring(r, s),
+                    ring(r, s + 1),
+                    ring(r + 1, s),
+                    ring(r + 1, s + 1),
+                );
                 tris.push([a, b, d]);
                 tris.push([a, d, c]);
             }
@@ -237,7 +269,9 @@ pub mod primitives {
             (-Vec3::Z, Vec3::Y, Vec3::X),
         ];
         for (nrm, u, v) in faces {
-            let face = grid_patch(n, n, |a, b| (nrm + u * (2.0 * a - 1.0) + v * (2.0 * b - 1.0)) * half);
+            let face = grid_patch(n, n, |a, b| {
+                (nrm + u * (2.0 * a - 1.0) + v * (2.0 * b - 1.0)) * half
+            });
             mesh.append(&face);
         }
         mesh.compute_normals();
@@ -247,10 +281,14 @@ pub mod primitives {
     /// A plane in x-z at y = 0, side `size`, `n x n` quads, facing +y.
     pub fn plane(size: f32, n: u32) -> Mesh {
         let n = n.max(1);
-        let mut m = grid_patch(n, n, |a, b| Vec3::new((a - 0.5) * size, 0.0, (0.5 - b) * size));
+        let mut m = grid_patch(n, n, |a, b| {
+            Vec3::new((a - 0.5) * size, 0.0, (0.5 - b) * size)
+        });
         m.uvs = Some(
             (0..=n)
-                .flat_map(|j| (0..=n).map(move |i| Vec2::new(i as f32 / n as f32, j as f32 / n as f32)))
+                .flat_map(|j| {
+                    (0..=n).map(move |i| Vec2::new(i as f32 / n as f32, j as f32 / n as f32))
+                })
                 .collect(),
         );
         m
@@ -336,7 +374,10 @@ mod tests {
         let e = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::NAN], vec![[0, 1, 2]], "m").unwrap_err();
         assert!(e.to_string().contains("vertex 3"), "{e}");
         let e = Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 7]], "m").unwrap_err();
-        assert!(e.to_string().contains("triangle 1 uses vertex index 8"), "{e}");
+        assert!(
+            e.to_string().contains("triangle 1 uses vertex index 8"),
+            "{e}"
+        );
     }
 
     #[test]

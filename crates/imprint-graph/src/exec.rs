@@ -81,7 +81,11 @@ enum Stage {
 }
 
 /// Runs `plan`; `progress(done, total)` is called after every frame.
-pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -> crate::Result<Report> {
+pub fn run(
+    plan: &Plan,
+    opts: &RunOptions,
+    progress: &mut dyn FnMut(u32, u32),
+) -> crate::Result<Report> {
     let frames = opts.frames.clone().unwrap_or(0..plan.file.frames);
     if frames.is_empty() || frames.end > plan.file.frames {
         return Err(Error::Invalid(format!(
@@ -102,7 +106,10 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
     };
     for name in &plan.order {
         let node = &plan.file.nodes[name];
-        let on_gpu = matches!(stages[name], Stage::Voxelize { gpu: true, .. } | Stage::Field { gpu: true, .. });
+        let on_gpu = matches!(
+            stages[name],
+            Stage::Voxelize { gpu: true, .. } | Stage::Field { gpu: true, .. }
+        );
         report.nodes.insert(
             name.clone(),
             NodeReport {
@@ -122,7 +129,9 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
         let mut cpu_fields: BTreeMap<String, Arc<DistanceField>> = BTreeMap::new();
         for name in &plan.order {
             let first_run = !values.contains_key(name);
-            let stage = stages.get_mut(name).expect("every planned node has a stage");
+            let stage = stages
+                .get_mut(name)
+                .expect("every planned node has a stage");
             let nr = report.nodes.get_mut(name).expect("report has every node");
             let t0 = Instant::now();
             let did_run = match stage {
@@ -138,21 +147,30 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                             }
                             .into());
                         }
-                        nr.metrics.insert("triangles".into(), mesh.triangles.len().into());
+                        nr.metrics
+                            .insert("triangles".into(), mesh.triangles.len().into());
                         values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
                         true
                     } else {
                         false
                     }
                 }
-                Stage::Voxelize { input, spec, variant, gpu: on_gpu, cpu } => {
+                Stage::Voxelize {
+                    input,
+                    spec,
+                    variant,
+                    gpu: on_gpu,
+                    cpu,
+                } => {
                     if first_run || changed[input.as_str()] {
                         let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
                             unreachable!("edges are typed")
                         };
                         let b = if *on_gpu {
                             let ctx = gpu.expect("GPU chosen at build");
-                            let b = imprint_stages::voxel::gpu::voxelize_gpu(ctx, mesh, spec, *variant)?;
+                            let b = imprint_stages::voxel::gpu::voxelize_gpu(
+                                ctx, mesh, spec, *variant,
+                            )?;
                             ctx.wait()?;
                             BoundaryValue::Gpu(Arc::new(b))
                         } else {
@@ -167,10 +185,18 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                         false
                     }
                 }
-                Stage::Field { input, band, gpu: on_gpu, builder, .. } => {
+                Stage::Field {
+                    input,
+                    band,
+                    gpu: on_gpu,
+                    builder,
+                    ..
+                } => {
                     if first_run || changed[input.as_str()] {
                         // Last frame's field, if nobody holds it any more, lends its buffers.
-                        if let Some(Value::Field(FieldValue::Cpu(old))) = values.remove(name.as_str()) {
+                        if let Some(Value::Field(FieldValue::Cpu(old))) =
+                            values.remove(name.as_str())
+                        {
                             if let Ok(old) = Arc::try_unwrap(old) {
                                 builder.recycle(old);
                             }
@@ -190,7 +216,9 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                         } else {
                             let cb = match b {
                                 BoundaryValue::Cpu(c) => c.clone(),
-                                BoundaryValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
+                                BoundaryValue::Gpu(g) => {
+                                    Arc::new(g.to_cpu(gpu.expect("GPU in use"))?)
+                                }
                             };
                             FieldValue::Cpu(Arc::new(builder.build(&cb, *band)?))
                         };
@@ -210,7 +238,12 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
 
             // After the timed part: error measurement and writers.
             match stages.get_mut(name).expect("stage") {
-                Stage::Field { measure, mesh_node, measured, .. } if did_run || done == 0 => {
+                Stage::Field {
+                    measure,
+                    mesh_node,
+                    measured,
+                    ..
+                } if did_run || done == 0 => {
                     let due = match *measure {
                         Measure::Never => false,
                         Measure::First => *measured == 0,
@@ -218,39 +251,61 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                     };
                     let field = cpu_field(name, &values, &mut cpu_fields, gpu)?;
                     let nr = report.nodes.get_mut(name).expect("report");
-                    nr.metrics.insert("band_cells".into(), field.band_cells().into());
-                    nr.metrics.insert("boundary_points".into(), field.points.len().into());
+                    nr.metrics
+                        .insert("band_cells".into(), field.band_cells().into());
+                    nr.metrics
+                        .insert("boundary_points".into(), field.points.len().into());
                     if due {
                         let t = Instant::now();
                         let Some(Value::Mesh(mesh)) = values.get(mesh_node.as_str()) else {
                             unreachable!("the mesh node ran before the field")
                         };
-                        let err = imprint_stages::metrics::field_error_with(&field, &Bvh::new(mesh));
+                        let err =
+                            imprint_stages::metrics::field_error_with(&field, &Bvh::new(mesh));
                         nr.measure_ms += t.elapsed().as_secs_f64() * 1e3;
                         *measured += 1;
-                        let worst = nr.metrics.get("error_max_cells").and_then(|v| v.as_f64()).unwrap_or(0.0);
+                        let worst = nr
+                            .metrics
+                            .get("error_max_cells")
+                            .and_then(|v| v.as_f64())
+                            .unwrap_or(0.0);
                         nr.metrics.insert("error_frame".into(), frame.into());
-                        nr.metrics.insert("error_cells".into(), serde_json::to_value(err).expect("plain data"));
-                        nr.metrics.insert("error_max_cells".into(), worst.max(err.max as f64).into());
-                        nr.metrics.insert("frames_measured".into(), (*measured).into());
+                        nr.metrics.insert(
+                            "error_cells".into(),
+                            serde_json::to_value(err).expect("plain data"),
+                        );
+                        nr.metrics
+                            .insert("error_max_cells".into(), worst.max(err.max as f64).into());
+                        nr.metrics
+                            .insert("frames_measured".into(), (*measured).into());
                         if !(err.max.is_finite()) {
                             return Err(Error::Numerical {
                                 node: name.clone(),
                                 frame,
-                                message: "the field's error against the exact distance is not finite".into(),
-                                hint: "check the mesh for huge coordinates; lower the resolution".into(),
+                                message:
+                                    "the field's error against the exact distance is not finite"
+                                        .into(),
+                                hint: "check the mesh for huge coordinates; lower the resolution"
+                                    .into(),
                             }
                             .into());
                         }
                     }
                 }
-                Stage::WriteField { input, dir, npy, slices, every } => {
+                Stage::WriteField {
+                    input,
+                    dir,
+                    npy,
+                    slices,
+                    every,
+                } => {
                     if done as u32 % *every == 0 {
                         let t = Instant::now();
                         let field = cpu_field(input, &values, &mut cpu_fields, gpu)?;
                         let mut n = 0;
                         if *npy {
-                            n += imprint_render::field_io::write_field(dir, input, frame, &field)?.len();
+                            n += imprint_render::field_io::write_field(dir, input, frame, &field)?
+                                .len();
                         }
                         for s in slices.iter() {
                             write_slice(dir, input, frame, &field, s)?;
@@ -259,8 +314,13 @@ pub fn run(plan: &Plan, opts: &RunOptions, progress: &mut dyn FnMut(u32, u32)) -
                         report.files_written += n;
                         let nr = report.nodes.get_mut(name).expect("report");
                         nr.record(t.elapsed().as_secs_f64() * 1e3);
-                        nr.metrics.insert("dir".into(), dir.display().to_string().into());
-                        let files = nr.metrics.get("files").and_then(|v| v.as_u64()).unwrap_or(0);
+                        nr.metrics
+                            .insert("dir".into(), dir.display().to_string().into());
+                        let files = nr
+                            .metrics
+                            .get("files")
+                            .and_then(|v| v.as_u64())
+                            .unwrap_or(0);
                         nr.metrics.insert("files".into(), (files + n as u64).into());
                     }
                 }
@@ -327,9 +387,8 @@ fn choose_gpu(
     match want {
         Backend::Cpu => Ok(false),
         Backend::Gpu => {
-            let ctx = GpuContext::shared().map_err(|e| {
-                Error::Gpu(format!("node '{node}' asks for backend Gpu, but {e}"))
-            })?;
+            let ctx = GpuContext::shared()
+                .map_err(|e| Error::Gpu(format!("node '{node}' asks for backend Gpu, but {e}")))?;
             *gpu = Some(ctx);
             Ok(true)
         }
@@ -360,15 +419,19 @@ fn build_stages(
                 // so a fitted grid holds the motion and partial runs get the same grid.
                 let frames = plan.file.frames;
                 let step = frames.div_ceil(64).max(1) as usize;
-                let times = (0..frames).step_by(step).chain([frames - 1]).map(|f| f as f32 / plan.file.fps);
+                let times = (0..frames)
+                    .step_by(step)
+                    .chain([frames - 1])
+                    .map(|f| f as f32 / plan.file.fps);
                 rest_bounds.insert(name.clone(), src.sampled_bounds(times));
                 Stage::Mesh(Box::new(src))
             }
             NodeSpec::Voxelize(v) => {
                 let spec = match v.grid {
-                    GridChoice::Fit { resolution, padding } => {
-                        GridSpec::fit(&rest_bounds[&v.mesh], resolution, padding)?
-                    }
+                    GridChoice::Fit {
+                        resolution,
+                        padding,
+                    } => GridSpec::fit(&rest_bounds[&v.mesh], resolution, padding)?,
                     GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
                         glam::Vec3::new(origin.0, origin.1, origin.2),
                         cell,
@@ -376,14 +439,21 @@ fn build_stages(
                     )?,
                 };
                 // Scratch, field and the writers' copies: refuse now rather than fail later.
-                spec.check_memory(&format!("node '{name}': voxelisation and distance field"), 9 + 8 + 16)?;
+                spec.check_memory(
+                    &format!("node '{name}': voxelisation and distance field"),
+                    9 + 8 + 16,
+                )?;
                 let on_gpu = choose_gpu(want, name, gpu)?;
                 Stage::Voxelize {
                     input: v.mesh.clone(),
                     spec,
                     variant: v.variant,
                     gpu: on_gpu,
-                    cpu: if on_gpu { None } else { Some(Voxelizer::new(spec)?) },
+                    cpu: if on_gpu {
+                        None
+                    } else {
+                        Some(Voxelizer::new(spec)?)
+                    },
                 }
             }
             NodeSpec::DistanceField(f) => {

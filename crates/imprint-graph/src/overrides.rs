@@ -6,9 +6,9 @@ use imprint_core::{Error, Result};
 
 /// Applies `assignment` (`NODE.FIELD[.FIELD…]=VALUE`, VALUE in RON syntax) to `text`.
 pub fn apply_override(text: &str, assignment: &str) -> Result<String> {
-    let (path, value) = assignment.split_once('=').ok_or_else(|| {
-        Error::Invalid(format!("--set {assignment}: expected NODE.FIELD=VALUE"))
-    })?;
+    let (path, value) = assignment
+        .split_once('=')
+        .ok_or_else(|| Error::Invalid(format!("--set {assignment}: expected NODE.FIELD=VALUE")))?;
     let mut parts = path.trim().split('.');
     let node = parts.next().filter(|n| !n.is_empty());
     let fields: Vec<&str> = parts.collect();
@@ -20,7 +20,9 @@ pub fn apply_override(text: &str, assignment: &str) -> Result<String> {
     let value = value.trim();
     let key = format!("\"{node}\"");
     let key_at = find_top_level_key(text, &key).ok_or_else(|| {
-        Error::Invalid(format!("--set {assignment}: the pipeline has no node named '{node}'"))
+        Error::Invalid(format!(
+            "--set {assignment}: the pipeline has no node named '{node}'"
+        ))
     })?;
     // After `"node":` comes `Kind(`.
     let open = text[key_at..]
@@ -37,11 +39,14 @@ pub fn apply_override(text: &str, assignment: &str) -> Result<String> {
                 return Ok(out);
             }
             Some((vstart, vend)) => {
-                let open = out[vstart..vend].find('(').map(|i| vstart + i).ok_or_else(|| {
-                    Error::Invalid(format!(
-                        "--set {assignment}: '{field}' of node '{node}' is not a structure"
-                    ))
-                })?;
+                let open = out[vstart..vend]
+                    .find('(')
+                    .map(|i| vstart + i)
+                    .ok_or_else(|| {
+                        Error::Invalid(format!(
+                            "--set {assignment}: '{field}' of node '{node}' is not a structure"
+                        ))
+                    })?;
                 body = (open + 1, matching_close(&out, open)?);
             }
             None if last => {
@@ -180,13 +185,31 @@ mod tests {
         let t = apply_override(SRC, "vox.grid.resolution=128").unwrap();
         assert!(t.contains("Fit(resolution: 128, padding: 0.1)"), "{t}");
         let t = apply_override(SRC, "field.backend=Some(Cpu)").unwrap();
-        assert!(t.contains("DistanceField(backend: Some(Cpu), boundary"), "{t}");
+        assert!(
+            t.contains("DistanceField(backend: Some(Cpu), boundary"),
+            "{t}"
+        );
     }
 
     #[test]
     fn bad_overrides_are_explained() {
-        assert!(apply_override(SRC, "nobody.band=1").unwrap_err().to_string().contains("no node named"));
-        assert!(apply_override(SRC, "field=1").unwrap_err().to_string().contains("NODE.FIELD"));
-        assert!(apply_override(SRC, "field.x.y=1").unwrap_err().to_string().contains("write it there"));
+        assert!(
+            apply_override(SRC, "nobody.band=1")
+                .unwrap_err()
+                .to_string()
+                .contains("no node named")
+        );
+        assert!(
+            apply_override(SRC, "field=1")
+                .unwrap_err()
+                .to_string()
+                .contains("NODE.FIELD")
+        );
+        assert!(
+            apply_override(SRC, "field.x.y=1")
+                .unwrap_err()
+                .to_string()
+                .contains("write it there")
+        );
     }
 }

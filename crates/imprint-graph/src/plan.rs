@@ -60,11 +60,18 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
     }
     if !(file.fps.is_finite() && file.fps > 0.0) {
         return Err(source
-            .error(whole, format!("fps must be a finite number > 0, got {}", file.fps), "here", None)
+            .error(
+                whole,
+                format!("fps must be a finite number > 0, got {}", file.fps),
+                "here",
+                None,
+            )
             .into());
     }
     if file.nodes.is_empty() {
-        return Err(source.error(whole, "the pipeline has no nodes", "here", None).into());
+        return Err(source
+            .error(whole, "the pipeline has no nodes", "here", None)
+            .into());
     }
 
     // Typed edges.
@@ -84,7 +91,9 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
                 return Err(source
                     .error(
                         source.field_span(name, port),
-                        format!("node '{name}': input '{port}' names '{input}', which is not a node"),
+                        format!(
+                            "node '{name}': input '{port}' names '{input}', which is not a node"
+                        ),
                         "no such node",
                         Some(help),
                     )
@@ -107,9 +116,14 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             return Err(source
                 .error(
                     source.node_span(start),
-                    format!("the graph has a cycle through nodes: {}", in_cycle.join(" -> ")),
+                    format!(
+                        "the graph has a cycle through nodes: {}",
+                        in_cycle.join(" -> ")
+                    ),
                     "part of a cycle",
-                    Some("a node cannot depend on its own output; remove one of these inputs".into()),
+                    Some(
+                        "a node cannot depend on its own output; remove one of these inputs".into(),
+                    ),
                 )
                 .into());
         }
@@ -178,7 +192,12 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
 fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -> Result<()> {
     let fail = |field: &str, msg: String| -> Error {
         source
-            .error(source.field_span(name, field), format!("node '{name}': {msg}"), "invalid value", None)
+            .error(
+                source.field_span(name, field),
+                format!("node '{name}': {msg}"),
+                "invalid value",
+                None,
+            )
             .into()
     };
     match node {
@@ -199,9 +218,15 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             }
         }
         NodeSpec::Voxelize(v) => match &v.grid {
-            GridChoice::Fit { resolution, padding } => {
+            GridChoice::Fit {
+                resolution,
+                padding,
+            } => {
                 if *resolution == 0 {
-                    return Err(fail("grid", "grid resolution must be at least 1, got 0".into()));
+                    return Err(fail(
+                        "grid",
+                        "grid resolution must be at least 1, got 0".into(),
+                    ));
                 }
                 if *resolution > imprint_core::grid::MAX_AXIS_CELLS {
                     let r = *resolution as u64;
@@ -215,18 +240,25 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                     ));
                 }
                 if !(padding.is_finite() && *padding >= 0.0) {
-                    return Err(fail("grid", format!("grid padding must be finite and >= 0, got {padding}")));
+                    return Err(fail(
+                        "grid",
+                        format!("grid padding must be finite and >= 0, got {padding}"),
+                    ));
                 }
             }
             GridChoice::Explicit { origin, cell, dims } => {
                 let o = glam::Vec3::new(origin.0, origin.1, origin.2);
                 let d = glam::UVec3::new(dims.0, dims.1, dims.2);
-                imprint_core::GridSpec::new(o, *cell, d).map_err(|e| fail("grid", e.to_string()))?;
+                imprint_core::GridSpec::new(o, *cell, d)
+                    .map_err(|e| fail("grid", e.to_string()))?;
             }
         },
         NodeSpec::DistanceField(f) => {
             if !(f.band.is_finite() && f.band > 0.0) {
-                return Err(fail("band", format!("band must be a finite number of cells > 0, got {}", f.band)));
+                return Err(fail(
+                    "band",
+                    format!("band must be a finite number of cells > 0, got {}", f.band),
+                ));
             }
             if let crate::schema::Measure::Every(0) = f.measure {
                 return Err(fail("measure", "Every(k) needs k >= 1".into()));
@@ -256,7 +288,11 @@ fn producers_of(t: PortType, file: &PipelineFile) -> String {
 }
 
 fn join(names: &[&String]) -> String {
-    names.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+    names
+        .iter()
+        .map(|s| s.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The name at edit distance <= 2, if any (for "did you mean").
@@ -275,7 +311,11 @@ fn edit_distance(a: &str, b: &str) -> usize {
     for (i, ca) in a.chars().enumerate() {
         let mut cur = vec![i + 1];
         for (j, cb) in b.iter().enumerate() {
-            cur.push((prev[j] + usize::from(ca != *cb)).min(prev[j + 1] + 1).min(cur[j] + 1));
+            cur.push(
+                (prev[j] + usize::from(ca != *cb))
+                    .min(prev[j + 1] + 1)
+                    .min(cur[j] + 1),
+            );
         }
         prev = cur;
     }
@@ -286,11 +326,22 @@ impl Plan {
     /// The graph as Graphviz DOT: nodes labelled with their kind, edges with the port type,
     /// pruned nodes dashed.
     pub fn dot(&self) -> String {
-        let mut s = String::from("digraph pipeline {\n  rankdir=LR;\n  node [shape=box, fontname=\"Helvetica\"];\n");
+        let mut s = String::from(
+            "digraph pipeline {\n  rankdir=LR;\n  node [shape=box, fontname=\"Helvetica\"];\n",
+        );
         for (name, node) in &self.file.nodes {
             let pruned = self.pruned.iter().any(|(n, _)| n == name);
-            let style = if pruned { ", style=dashed, color=gray" } else if node.is_writer() { ", style=rounded" } else { "" };
-            s += &format!("  \"{name}\" [label=\"{name}\\n{}\"{style}];\n", node.kind());
+            let style = if pruned {
+                ", style=dashed, color=gray"
+            } else if node.is_writer() {
+                ", style=rounded"
+            } else {
+                ""
+            };
+            s += &format!(
+                "  \"{name}\" [label=\"{name}\\n{}\"{style}];\n",
+                node.kind()
+            );
         }
         for (name, node) in &self.file.nodes {
             for (port, input, t) in node.inputs() {

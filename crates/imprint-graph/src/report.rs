@@ -70,7 +70,9 @@ impl Report {
             self.frames.len(),
             self.wall_ms,
             self.threads,
-            self.adapter.as_ref().map_or(String::new(), |a| format!(", GPU: {a}"))
+            self.adapter
+                .as_ref()
+                .map_or(String::new(), |a| format!(", GPU: {a}"))
         );
         s
     }

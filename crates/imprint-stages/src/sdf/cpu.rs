@@ -14,7 +14,7 @@
 //! keeps point distances, as published.
 
 use glam::Vec3;
-use imprint_core::geom::closest_point_on_triangle;
+use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i};
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -225,35 +225,30 @@ fn splat_point(
     near: &mut [u32],
 ) {
     const SLACK: f32 = 1e-3;
-    let zlo = ((p.z - band - SLACK).ceil().max(z0 as f32)) as usize;
-    let zhi = (p.z + band + SLACK).floor().min(z1 as f32 - 1.0);
-    if zhi < zlo as f32 {
-        return;
-    }
-    for z in zlo..=zhi as usize {
+    let zlo = ceil_i(p.z - band - SLACK).max(z0 as i32);
+    let zhi = floor_i(p.z + band + SLACK).min(z1 as i32 - 1);
+    for z in zlo..=zhi {
         let dz = z as f32 - p.z;
         let rz2 = a2 - dz * dz;
         if rz2 < -SLACK {
             continue;
         }
         let ry = rz2.max(0.0).sqrt();
-        let ylo = (p.y - ry - SLACK).ceil().max(0.0) as usize;
-        let yhi = (p.y + ry + SLACK).floor().min(ny as f32 - 1.0);
-        if yhi < ylo as f32 {
-            continue;
-        }
-        for y in ylo..=yhi as usize {
+        let ylo = ceil_i(p.y - ry - SLACK).max(0);
+        let yhi = floor_i(p.y + ry + SLACK).min(ny as i32 - 1);
+        for y in ylo..=yhi {
             let dy = y as f32 - p.y;
             let dyz2 = dy * dy + dz * dz;
             let rx = (a2 - dyz2).max(0.0).sqrt();
-            let xlo = (p.x - rx - SLACK).ceil().max(0.0) as usize;
-            let xhi = (p.x + rx + SLACK).floor().min(nx as f32 - 1.0);
-            if xhi < xlo as f32 {
+            let xlo = ceil_i(p.x - rx - SLACK).max(0);
+            let xhi = floor_i(p.x + rx + SLACK).min(nx as i32 - 1);
+            if xhi < xlo {
                 continue;
             }
+            let (z, y, xlo, xhi) = (z as usize, y as usize, xlo as usize, xhi as usize);
             let row = (z - z0) * nx * ny + y * nx;
-            let d_row = &mut d2s[row + xlo..=row + xhi as usize];
-            let n_row = &mut near[row + xlo..=row + xhi as usize];
+            let d_row = &mut d2s[row + xlo..=row + xhi];
+            let n_row = &mut near[row + xlo..=row + xhi];
             // Branch-free select: the compiler turns it into blends, and the many near-equal
             // candidates of neighbouring points do not cost mispredictions.
             for (k, (d, n)) in d_row.iter_mut().zip(n_row.iter_mut()).enumerate() {

@@ -7,8 +7,8 @@
 //! are reset only where they were touched, so a `Voxelizer` kept across frames costs time in
 //! proportion to the surface, not the grid.
 
-use glam::{UVec3, Vec3};
-use imprint_core::geom::{closest_point_on_triangle, triangle_box_overlap};
+use glam::{IVec3, UVec3, Vec3};
+use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -48,7 +48,11 @@ impl Voxelizer {
     /// clipped away.
     pub fn run(&mut self, mesh: &Mesh, variant: BoundaryVariant) -> Result<Boundary> {
         let spec = self.spec;
-        let verts: Vec<Vec3> = mesh.positions.par_iter().map(|&p| spec.to_cell(p)).collect();
+        let verts: Vec<Vec3> = mesh
+            .positions
+            .par_iter()
+            .map(|&p| spec.to_cell(p))
+            .collect();
         let dims = spec.dims.as_ivec3();
         let nx = spec.dims.x as usize;
         let nxy = nx * spec.dims.y as usize;
@@ -62,8 +66,9 @@ impl Voxelizer {
                 for (k, t) in tris.iter().enumerate() {
                     let ti = (chunk * TRIANGLES_PER_TASK + k) as u64;
                     let [a, b, c] = t.map(|i| verts[i as usize]);
-                    let lo = (a.min(b).min(c) - CELL_HALF).ceil().as_ivec3().max(glam::IVec3::ZERO);
-                    let hi = (a.max(b).max(c) + CELL_HALF).floor().as_ivec3().min(dims - 1);
+                    let (mn, mx) = (a.min(b).min(c) - CELL_HALF, a.max(b).max(c) + CELL_HALF);
+                    let lo = IVec3::new(ceil_i(mn.x), ceil_i(mn.y), ceil_i(mn.z)).max(IVec3::ZERO);
+                    let hi = IVec3::new(floor_i(mx.x), floor_i(mx.y), floor_i(mx.z)).min(dims - 1);
                     for z in lo.z..=hi.z {
                         for y in lo.y..=hi.y {
                             for x in lo.x..=hi.x {
@@ -76,13 +81,27 @@ impl Voxelizer {
                                     continue;
                                 }
                                 if d2 > 0.25
-                                    && !triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c)
+                                    && !triangle_box_overlap(
+                                        centre,
+                                        Vec3::splat(CELL_HALF),
+                                        a,
+                                        b,
+                                        c,
+                                    )
                                 {
                                     continue;
                                 }
                                 let cell = x as usize + nx * y as usize + nxy * z as usize;
-                                best[cell].fetch_min(((d2.to_bits() as u64) << 32) | ti, Relaxed);
-                                occupied[cell / 64].fetch_or(1 << (cell % 64), Relaxed);
+                                // Plain loads first: x86 has no atomic min (it is a CAS
+                                // loop) and most proposals lose or find the bit set.
+                                let key = ((d2.to_bits() as u64) << 32) | ti;
+                                if key < best[cell].load(Relaxed) {
+                                    best[cell].fetch_min(key, Relaxed);
+                                }
+                                let bit = 1u64 << (cell % 64);
+                                if occupied[cell / 64].load(Relaxed) & bit == 0 {
+                                    occupied[cell / 64].fetch_or(bit, Relaxed);
+                                }
                             }
                         }
                     }
