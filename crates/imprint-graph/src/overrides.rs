@@ -157,7 +157,9 @@ fn find_field(text: &str, body: (usize, usize), field: &str) -> Option<(usize, u
             break;
         }
     }
-    let vstart = key_end?;
+    let after = key_end?;
+    // Keep the whitespace after the colon; replace only the value.
+    let vstart = after + (text[after..body.1].len() - text[after..body.1].trim_start().len());
     let mut vend = body.1;
     scan(text, vstart, body.1, |i, c, depth| {
         if depth == 0 && c == ',' {
