@@ -339,9 +339,20 @@ fn field_command_computes_one_mesh() {
 fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
     let c = case(&good_nodes(&teapot()));
     let f = c.file.to_str().unwrap();
-    let cpu = imprint(&["run", f, "--out", "cpu", "--backend", "cpu"], c.dir.path());
-    assert_eq!(cpu.status.code(), Some(0), "{}", String::from_utf8_lossy(&cpu.stderr));
-    let gpu = imprint(&["run", f, "--out", "gpu", "--backend", "gpu"], c.dir.path());
+    let cpu = imprint(
+        &["run", f, "--out", "cpu", "--backend", "cpu"],
+        c.dir.path(),
+    );
+    assert_eq!(
+        cpu.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&cpu.stderr)
+    );
+    let gpu = imprint(
+        &["run", f, "--out", "gpu", "--backend", "gpu"],
+        c.dir.path(),
+    );
     let err = String::from_utf8_lossy(&gpu.stderr);
     if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
         assert!(
@@ -353,7 +364,8 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
     }
     assert_eq!(gpu.status.code(), Some(0), "{err}");
     let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
+            .unwrap();
     assert_eq!(report["nodes"]["field"]["backend"], "gpu");
     assert_eq!(report["nodes"]["vox"]["backend"], "gpu");
     for frame in ["0000", "0001"] {
@@ -362,11 +374,24 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
         let (sb, b) = imprint_render::read_npy_f32(&c.dir.path().join("gpu").join(&name)).unwrap();
         assert_eq!(sa, sb);
         let meta: serde_json::Value = serde_json::from_slice(
-            &std::fs::read(c.dir.path().join("cpu/out").join(format!("field_{frame}_field.json"))).unwrap(),
+            &std::fs::read(
+                c.dir
+                    .path()
+                    .join("cpu/out")
+                    .join(format!("field_{frame}_field.json")),
+            )
+            .unwrap(),
         )
         .unwrap();
         let cell = meta["cell_size"].as_f64().unwrap() as f32;
-        let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs() / cell).fold(0.0, f32::max);
-        assert!(worst < 1e-3, "frame {frame}: CPU and GPU differ by {worst} cells");
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs() / cell)
+            .fold(0.0, f32::max);
+        assert!(
+            worst < 1e-3,
+            "frame {frame}: CPU and GPU differ by {worst} cells"
+        );
     }
 }

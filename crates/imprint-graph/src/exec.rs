@@ -196,10 +196,9 @@ pub fn run(
                         // Last frame's field, if nobody holds it any more, lends its buffers.
                         if let Some(Value::Field(FieldValue::Cpu(old))) =
                             values.remove(name.as_str())
+                            && let Ok(old) = Arc::try_unwrap(old)
                         {
-                            if let Ok(old) = Arc::try_unwrap(old) {
-                                builder.recycle(old);
-                            }
+                            builder.recycle(old);
                         }
                         let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
                             unreachable!("edges are typed")
@@ -247,7 +246,7 @@ pub fn run(
                     let due = match *measure {
                         Measure::Never => false,
                         Measure::First => *measured == 0,
-                        Measure::Every(k) => done as u32 % k == 0,
+                        Measure::Every(k) => (done as u32).is_multiple_of(k),
                     };
                     let field = cpu_field(name, &values, &mut cpu_fields, gpu)?;
                     let nr = report.nodes.get_mut(name).expect("report");
@@ -298,31 +297,29 @@ pub fn run(
                     npy,
                     slices,
                     every,
-                } => {
-                    if done as u32 % *every == 0 {
-                        let t = Instant::now();
-                        let field = cpu_field(input, &values, &mut cpu_fields, gpu)?;
-                        let mut n = 0;
-                        if *npy {
-                            n += imprint_render::field_io::write_field(dir, input, frame, &field)?
-                                .len();
-                        }
-                        for s in slices.iter() {
-                            write_slice(dir, input, frame, &field, s)?;
-                            n += 1;
-                        }
-                        report.files_written += n;
-                        let nr = report.nodes.get_mut(name).expect("report");
-                        nr.record(t.elapsed().as_secs_f64() * 1e3);
-                        nr.metrics
-                            .insert("dir".into(), dir.display().to_string().into());
-                        let files = nr
-                            .metrics
-                            .get("files")
-                            .and_then(|v| v.as_u64())
-                            .unwrap_or(0);
-                        nr.metrics.insert("files".into(), (files + n as u64).into());
+                } if (done as u32).is_multiple_of(*every) => {
+                    let t = Instant::now();
+                    let field = cpu_field(input, &values, &mut cpu_fields, gpu)?;
+                    let mut n = 0;
+                    if *npy {
+                        n +=
+                            imprint_render::field_io::write_field(dir, input, frame, &field)?.len();
                     }
+                    for s in slices.iter() {
+                        write_slice(dir, input, frame, &field, s)?;
+                        n += 1;
+                    }
+                    report.files_written += n;
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.metrics
+                        .insert("dir".into(), dir.display().to_string().into());
+                    let files = nr
+                        .metrics
+                        .get("files")
+                        .and_then(|v| v.as_u64())
+                        .unwrap_or(0);
+                    nr.metrics.insert("files".into(), (files + n as u64).into());
                 }
                 _ => {}
             }

@@ -17,6 +17,9 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 /// lying exactly on a cell face marks both cells even after rounding.
 pub const CELL_HALF: f32 = 0.5 + 1e-5;
 const EMPTY: u64 = u64::MAX;
+
+/// Cells, points and owning triangles of one run of occupancy words.
+type BoundaryPart = (Vec<u32>, Vec<Vec3>, Vec<[Vec3; 3]>);
 const TRIANGLES_PER_TASK: usize = 2048;
 const WORDS_PER_TASK: usize = 256;
 
@@ -109,7 +112,7 @@ impl Voxelizer {
             });
 
         // Pass 2: surface cells in increasing index; reset what was touched.
-        let parts: Vec<(Vec<u32>, Vec<Vec3>, Vec<[Vec3; 3]>)> = occupied
+        let parts: Vec<BoundaryPart> = occupied
             .par_chunks(WORDS_PER_TASK)
             .enumerate()
             .map(|(chunk, words)| {
