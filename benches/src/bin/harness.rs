@@ -123,7 +123,11 @@ fn main() {
     writeln!(md, "\n## 4. GPU path\n").unwrap();
     md += &gpu_table(&root, repeat);
 
-    writeln!(md, "\nLoad average at end: {}.", Machine::detect().load).unwrap();
+    writeln!(md, "\nLoad average at end: {}.\n", Machine::detect().load).unwrap();
+    // The hand-written reading of the figures.
+    if let Ok(notes) = std::fs::read_to_string(root.join("benches/notes.md")) {
+        md += &notes;
+    }
     imprint_core::io::atomic_write_bytes(&out, md.as_bytes()).expect("write BENCHMARKS.md");
     eprintln!("wrote {}", out.display());
 }
