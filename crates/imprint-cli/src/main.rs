@@ -262,7 +262,7 @@ fn field_pipeline(
 fn describe(plan: &Plan) -> String {
     let f = &plan.file;
     let mut s = format!(
-        "{}: valid. {} frame(s) at {} fps, backend {:?}, seed {}\n\nwill run (in order):\n",
+        "{}: valid. {} frame(s) at {} fps, backend {:?}, seed {}\n\nwill run (in order; Auto = a hardware GPU if there is one, else the CPU):\n",
         plan.source.name, f.frames, f.fps, f.backend, f.seed
     );
     let statics = static_nodes(plan);
@@ -285,10 +285,16 @@ fn describe(plan: &Plan) -> String {
             .iter()
             .map(|(p, n, t)| format!("{p}={n} ({t})"))
             .collect();
+        // Nodes with two paths run where the file says; the rest run on the CPU.
+        let on = match node.backend().or(Some(f.backend)) {
+            Some(b) if node.has_gpu_path() => format!("{b:?}"),
+            _ => "Cpu".to_string(),
+        };
         s += &format!(
-            "  {:<16} {:<14} {:<40} {}\n",
+            "  {:<16} {:<14} {:<5} {:<40} {}\n",
             name,
             node.kind(),
+            on,
             when,
             if inputs.is_empty() {
                 String::new()

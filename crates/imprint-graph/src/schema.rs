@@ -193,6 +193,11 @@ impl NodeSpec {
         self.output().is_none()
     }
 
+    /// Whether the node has a GPU path (the others always run on the CPU).
+    pub fn has_gpu_path(&self) -> bool {
+        matches!(self, NodeSpec::Voxelize(_) | NodeSpec::DistanceField(_))
+    }
+
     /// The per-node backend override, for nodes that have two paths.
     pub fn backend(&self) -> Option<Backend> {
         match self {
