@@ -15,7 +15,7 @@ mod context;
 mod timer;
 
 pub use context::{GpuContext, WORKGROUP_SIZE};
-pub use timer::{GpuTimer, Timings, compute_pass};
+pub use timer::{Dispatch, GpuTimer, Timings, compute_pass, record_pass, submit};
 pub use wgpu;
 
 /// The WGSL source of a file under the workspace `shaders/` folder, embedded at compile time

@@ -164,3 +164,45 @@ pub fn compute_pass<'e>(
         timestamp_writes,
     })
 }
+
+/// How a recorded pass is sized.
+pub enum Dispatch<'a> {
+    /// One invocation per item (folded into x and y past the per-dimension limit).
+    Threads(u32),
+    /// Explicit workgroup counts.
+    Groups(u32, u32, u32),
+    /// Workgroup counts a previous pass wrote into this buffer (x, y, z as u32).
+    Indirect(&'a wgpu::Buffer),
+}
+
+/// Records one compute pass: `pipeline` with `buffers` bound to group 0, sized by `dispatch`,
+/// timed when a timer is given. Every stage records its passes this way.
+pub fn record_pass(
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    buffers: &[(u32, &wgpu::Buffer)],
+    dispatch: Dispatch<'_>,
+    timer: Option<&mut GpuTimer>,
+) {
+    let bind = ctx.bind_group(label, pipeline, buffers);
+    let mut pass = compute_pass(encoder, label, timer);
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, &bind, &[]);
+    match dispatch {
+        Dispatch::Threads(n) => ctx.dispatch_1d(&mut pass, n),
+        Dispatch::Groups(x, y, z) => pass.dispatch_workgroups(x, y, z),
+        Dispatch::Indirect(args) => pass.dispatch_workgroups_indirect(args, 0),
+    }
+}
+
+/// Submits `encoder`, through the timer when there is one (it resolves its queries).
+pub fn submit(ctx: &GpuContext, encoder: wgpu::CommandEncoder, timer: Option<&mut GpuTimer>) {
+    match timer {
+        Some(t) => t.submit(ctx, encoder),
+        None => {
+            ctx.queue.submit([encoder.finish()]);
+        }
+    }
+}

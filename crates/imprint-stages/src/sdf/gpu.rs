@@ -17,7 +17,7 @@
 use super::cpu::validate_band;
 use crate::voxel::gpu::GpuBoundary;
 use imprint_core::{BoundaryVariant, DistanceField, Error, Result};
-use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
+use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
 use std::sync::Arc;
 
 /// Bytes per cell of the field's largest buffer (the vec4 field; the limit is per binding).
@@ -170,37 +170,40 @@ pub fn build_field_gpu_timed(
     ctx.fill_u32(&mut encoder, &best_d2, u32::MAX)?;
     ctx.fill_u32(&mut encoder, &splat_nearest, u32::MAX)?;
     let p0 = ctx.uniform_buffer("field params", &params(0));
-    {
-        let bind = ctx.bind_group(
-            "field compact",
-            &compact,
-            &[
-                (0, &p0),
-                (1, &boundary.points),
-                (6, &surface),
-                (7, &surface_count),
-            ],
-        );
-        let mut pass = compute_pass(&mut encoder, "field compact", timer.as_deref_mut());
-        pass.set_pipeline(&compact);
-        pass.set_bind_group(0, &bind, &[]);
-        ctx.dispatch_1d(&mut pass, n_cells);
-    }
-    {
-        let bind = ctx.bind_group(
-            "field size dispatch",
-            &size_dispatch,
-            &[(0, &p0), (7, &surface_count), (8, &dispatch_args)],
-        );
-        let mut pass = compute_pass(&mut encoder, "field size dispatch", None);
-        pass.set_pipeline(&size_dispatch);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(1, 1, 1);
-    }
+    record_pass(
+        ctx,
+        &mut encoder,
+        "field compact",
+        &compact,
+        &[
+            (0, &p0),
+            (1, &boundary.points),
+            (6, &surface),
+            (7, &surface_count),
+        ],
+        Dispatch::Threads(n_cells),
+        timer.as_deref_mut(),
+    );
+    record_pass(
+        ctx,
+        &mut encoder,
+        "field size dispatch",
+        &size_dispatch,
+        &[(0, &p0), (7, &surface_count), (8, &dispatch_args)],
+        Dispatch::Groups(1, 1, 1),
+        None,
+    );
     for mode in [0, 1] {
         let p = ctx.uniform_buffer("field params", &params(mode));
-        let bind = ctx.bind_group(
-            "field scatter",
+        let label = if mode == 0 {
+            "field splat (distance)"
+        } else {
+            "field splat (point)"
+        };
+        record_pass(
+            ctx,
+            &mut encoder,
+            label,
             &scatter,
             &[
                 (0, &p),
@@ -211,43 +214,29 @@ pub fn build_field_gpu_timed(
                 (6, &surface),
                 (7, &surface_count),
             ],
+            Dispatch::Indirect(&dispatch_args),
+            timer.as_deref_mut(),
         );
-        let label = if mode == 0 {
-            "field splat (distance)"
-        } else {
-            "field splat (point)"
-        };
-        let mut pass = compute_pass(&mut encoder, label, timer.as_deref_mut());
-        pass.set_pipeline(&scatter);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups_indirect(&dispatch_args, 0);
     }
-    {
-        let bind = ctx.bind_group(
-            "field finish",
-            &finish,
-            &[
-                (0, &p0),
-                (1, &boundary.points),
-                (2, &best_d2),
-                (3, &splat_nearest),
-                (4, &field),
-                (9, &boundary.owner),
-                (10, &boundary.faces),
-                (11, &nearest_cell),
-            ],
-        );
-        let mut pass = compute_pass(&mut encoder, "field finish", timer.as_deref_mut());
-        pass.set_pipeline(&finish);
-        pass.set_bind_group(0, &bind, &[]);
-        ctx.dispatch_1d(&mut pass, n_cells);
-    }
-    match timer {
-        Some(t) => t.submit(ctx, encoder),
-        None => {
-            ctx.queue.submit([encoder.finish()]);
-        }
-    }
+    record_pass(
+        ctx,
+        &mut encoder,
+        "field finish",
+        &finish,
+        &[
+            (0, &p0),
+            (1, &boundary.points),
+            (2, &best_d2),
+            (3, &splat_nearest),
+            (4, &field),
+            (9, &boundary.owner),
+            (10, &boundary.faces),
+            (11, &nearest_cell),
+        ],
+        Dispatch::Threads(n_cells),
+        timer.as_deref_mut(),
+    );
+    submit(ctx, encoder, timer);
     Ok(GpuField {
         spec,
         band,

@@ -16,7 +16,7 @@
 use super::cpu::CELL_HALF;
 use glam::Vec3;
 use imprint_core::{Boundary, BoundaryVariant, Error, GridSpec, Mesh, Result};
-use imprint_gpu::{GpuContext, GpuTimer, compute_pass, shader};
+use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
 use std::sync::Arc;
 
 /// Bytes per cell of the voxeliser's largest buffer (the vec4 points; the limit is per binding).
@@ -211,45 +211,38 @@ pub fn voxelize_gpu_timed(
     // Mode 1 chooses the owning triangle (wanted for the Centre variant too: the CPU records it).
     for mode in [0, 1] {
         let p = ctx.uniform_buffer("voxel params", &params(mode));
-        let bind = ctx.bind_group(
-            "voxel touch",
-            &touch,
-            &[(0, &p), (1, &tri_buf), (2, &best_d2), (3, &best_tri)],
-        );
         let label = if mode == 0 {
             "voxel touch (distance)"
         } else {
             "voxel touch (triangle)"
         };
-        let mut pass = compute_pass(&mut encoder, label, timer.as_deref_mut());
-        pass.set_pipeline(&touch);
-        pass.set_bind_group(0, &bind, &[]);
-        ctx.dispatch_1d(&mut pass, n_tris);
-    }
-    {
-        let p = ctx.uniform_buffer("voxel params", &params(0));
-        let bind = ctx.bind_group(
-            "voxel finish",
-            &finish,
-            &[
-                (0, &p),
-                (1, &tri_buf),
-                (2, &best_d2),
-                (3, &best_tri),
-                (4, &points),
-            ],
+        record_pass(
+            ctx,
+            &mut encoder,
+            label,
+            &touch,
+            &[(0, &p), (1, &tri_buf), (2, &best_d2), (3, &best_tri)],
+            Dispatch::Threads(n_tris),
+            timer.as_deref_mut(),
         );
-        let mut pass = compute_pass(&mut encoder, "voxel points", timer.as_deref_mut());
-        pass.set_pipeline(&finish);
-        pass.set_bind_group(0, &bind, &[]);
-        ctx.dispatch_1d(&mut pass, n_cells);
     }
-    match timer {
-        Some(t) => t.submit(ctx, encoder),
-        None => {
-            ctx.queue.submit([encoder.finish()]);
-        }
-    }
+    let p = ctx.uniform_buffer("voxel params", &params(0));
+    record_pass(
+        ctx,
+        &mut encoder,
+        "voxel points",
+        &finish,
+        &[
+            (0, &p),
+            (1, &tri_buf),
+            (2, &best_d2),
+            (3, &best_tri),
+            (4, &points),
+        ],
+        Dispatch::Threads(n_cells),
+        timer.as_deref_mut(),
+    );
+    submit(ctx, encoder, timer);
     Ok(GpuBoundary {
         spec: *spec,
         variant,
