@@ -74,6 +74,8 @@ impl FieldBuilder {
         // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
         let unset = f32::from_bits(a2.to_bits() + 1);
         let far = band * spec.cell;
+        // Bands up to WINDOW/2 - 1 cells take the fixed-window splat.
+        let fast = band <= (WINDOW / 2 - 1) as f32;
         let refine = boundary.variant == BoundaryVariant::Closest;
         // Owning triangles in grid units, for the refinement.
         let faces: Vec<[Vec3; 3]> = if refine {
@@ -100,7 +102,10 @@ impl FieldBuilder {
                 let first = cell_z.partition_point(|&z| z + reach < z0);
                 let last = cell_z.partition_point(|&z| z <= z1 - 1 + reach);
                 for (pi, p) in pts.iter().enumerate().take(last).skip(first) {
-                    splat_point(*p, pi as u32, band, a2, z0, z1, nx, ny, d2s, near);
+                    let (p, pi) = (*p, pi as u32);
+                    if !(fast && splat_point_window(p, pi, band, a2, z0, z1, nx, ny, d2s, near)) {
+                        splat_point(p, pi, band, a2, z0, z1, nx, ny, d2s, near);
+                    }
                 }
                 if !refine {
                     for (d, n) in d2s.iter_mut().zip(near.iter()) {
@@ -207,6 +212,66 @@ fn refine_to_faces(
                 owner[k] = best.1;
             }
         });
+}
+
+/// Cells per row in [`splat_point_window`]: a point's ball of radius <= 3 fits in the 8 cells
+/// floor(x) - 3 ..= floor(x) + 4.
+const WINDOW: usize = 8;
+
+/// The same writes as [`splat_point`] for bands <= 3, faster: every row is the fixed window of
+/// `WINDOW` cells around the point, so there are no square roots or range computations per row
+/// and the compiler vectorises the row. Cells outside the ball fail the `d² < best` test as
+/// they do in `splat_point` (whose best starts just above a²), and d² is the same expression,
+/// so the result is identical. Returns false, writing nothing, when the window would leave
+/// the grid (points near its x faces take `splat_point`).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn splat_point_window(
+    p: Vec3,
+    pi: u32,
+    band: f32,
+    a2: f32,
+    z0: usize,
+    z1: usize,
+    nx: usize,
+    ny: usize,
+    d2s: &mut [f32],
+    near: &mut [u32],
+) -> bool {
+    const SLACK: f32 = 1e-3;
+    let x0 = floor_i(p.x) - (WINDOW as i32 / 2 - 1);
+    if x0 < 0 || x0 as usize + WINDOW > nx {
+        return false;
+    }
+    let x0 = x0 as usize;
+    let dx2: [f32; WINDOW] = std::array::from_fn(|k| {
+        let dx = (x0 + k) as f32 - p.x;
+        dx * dx
+    });
+    let zlo = ceil_i(p.z - band - SLACK).max(z0 as i32);
+    let zhi = floor_i(p.z + band + SLACK).min(z1 as i32 - 1);
+    let ylo = ceil_i(p.y - band - SLACK).max(0);
+    let yhi = floor_i(p.y + band + SLACK).min(ny as i32 - 1);
+    for z in zlo..=zhi {
+        let dz = z as f32 - p.z;
+        for y in ylo..=yhi {
+            let dy = y as f32 - p.y;
+            let dyz2 = dy * dy + dz * dz;
+            if dyz2 > a2 {
+                continue;
+            }
+            let row = (z as usize - z0) * nx * ny + y as usize * nx + x0;
+            let d_row: &mut [f32; WINDOW] = (&mut d2s[row..row + WINDOW]).try_into().unwrap();
+            let n_row: &mut [u32; WINDOW] = (&mut near[row..row + WINDOW]).try_into().unwrap();
+            for k in 0..WINDOW {
+                let d2 = dx2[k] + dyz2;
+                let closer = d2 < d_row[k];
+                d_row[k] = if closer { d2 } else { d_row[k] };
+                n_row[k] = if closer { pi } else { n_row[k] };
+            }
+        }
+    }
+    true
 }
 
 /// Writes point `p` (grid units, index `pi`) into the cells of slab [z0, z1) within `band`.
