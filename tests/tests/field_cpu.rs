@@ -67,6 +67,22 @@ fn plane_distance_is_exact_with_closest_points() {
         a.in_band && (a.distance - exact).abs() < 1e-4 * spec.cell,
         "{a:?} vs {exact}"
     );
+    // "B" blends distances: exact where all 8 corners lie on one side (|d| is linear there),
+    // but it cannot reach 0 on the surface between cells, where A can.
+    let b = f.sample(p, Sampling::Distance);
+    assert!(
+        b.in_band && (b.distance - exact).abs() < 1e-4 * spec.cell,
+        "{b:?} vs {exact}"
+    );
+    let on = p0 + Vec3::new(0.011, 0.013, 0.0);
+    let on = on - (on - p0).dot(n) * n;
+    let a = f.sample(on, Sampling::Vector);
+    let b = f.sample(on, Sampling::Distance);
+    assert!(
+        a.distance < 1e-4 * spec.cell,
+        "A is exact on the surface: {a:?}"
+    );
+    assert!(b.distance > 0.05 * spec.cell, "B is not: {b:?}");
 }
 
 #[test]

@@ -320,7 +320,9 @@ fn static_nodes(plan: &Plan) -> Vec<String> {
     for name in &plan.order {
         let node = &plan.file.nodes[name];
         let is_static = match node {
-            imprint_graph::schema::NodeSpec::Mesh(m) => m.motion.is_empty(),
+            imprint_graph::schema::NodeSpec::Mesh(m) => {
+                m.motion.iter().all(|mo| mo.is_time_invariant())
+            }
             _ => {
                 !node.inputs().is_empty()
                     && node
