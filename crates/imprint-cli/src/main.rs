@@ -273,6 +273,9 @@ fn describe(plan: &Plan) -> String {
                 imprint_graph::schema::NodeSpec::WriteField(w) if w.every > 1 => {
                     format!("every {} frames", w.every)
                 }
+                imprint_graph::schema::NodeSpec::WriteMesh(w) if w.every > 1 => {
+                    format!("every {} frames", w.every)
+                }
                 _ => "every frame".into(),
             }
         } else if statics.contains(name) {

@@ -395,3 +395,37 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
         );
     }
 }
+
+#[test]
+fn write_mesh_writes_frames_other_tools_can_read() {
+    let nodes = format!(
+        "{}\n        \"objs\": WriteMesh(mesh: \"m\"),\n        \"plys\": WriteMesh(mesh: \"m\", format: Ply, every: 2),",
+        good_nodes(&teapot())
+    );
+    let c = case(&nodes);
+    let out = imprint(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let d = c.dir.path().join("o");
+    let teapot = imprint_core::Mesh::load_obj(&assets().join("teapot.obj")).unwrap();
+    for frame in ["0000", "0001"] {
+        let m = imprint_core::Mesh::load_obj(&d.join(format!("objs/m_{frame}.obj"))).unwrap();
+        assert_eq!(m.triangles.len(), teapot.triangles.len());
+    }
+    assert!(d.join("plys/m_0000.ply").is_file());
+    assert!(
+        !d.join("plys/m_0001.ply").exists(),
+        "every: 2 skips frame 1"
+    );
+    // Frame 0 is the rest mesh breathing at sin(0) = 0: positions equal the file's.
+    let m0 = imprint_core::Mesh::load_obj(&d.join("objs/m_0000.obj")).unwrap();
+    let (a, b) = (m0.bounds(), teapot.bounds());
+    assert!((a.min - b.min).length() < 1e-5 && (a.max - b.max).length() < 1e-5);
+}

@@ -16,6 +16,7 @@ pub mod error;
 pub mod field;
 pub mod geom;
 pub mod grid;
+pub mod heightfield;
 pub mod io;
 pub mod mesh;
 pub mod raster;
@@ -25,6 +26,7 @@ pub use error::{Error, Result};
 pub use field::{Boundary, BoundaryVariant, DistanceField, FieldSample, Sampling};
 pub use geom::Aabb;
 pub use grid::{Grid3, GridSpec};
+pub use heightfield::HeightField;
 pub use mesh::Mesh;
 pub use raster::DepthMap;
 

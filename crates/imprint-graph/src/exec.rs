@@ -7,7 +7,7 @@
 
 use crate::plan::Plan;
 use crate::report::{NodeReport, Report};
-use crate::schema::{Backend, GridChoice, Measure, NodeSpec};
+use crate::schema::{Backend, GridChoice, Measure, MeshFormat, NodeSpec};
 use imprint_core::bvh::Bvh;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, Mesh};
 use imprint_gpu::GpuContext;
@@ -76,6 +76,12 @@ enum Stage {
         dir: PathBuf,
         npy: bool,
         slices: Vec<SliceOptions>,
+        every: u32,
+    },
+    WriteMesh {
+        input: String,
+        dir: PathBuf,
+        format: MeshFormat,
         every: u32,
     },
 }
@@ -227,7 +233,7 @@ pub fn run(
                         false
                     }
                 }
-                Stage::WriteField { .. } => false,
+                Stage::WriteField { .. } | Stage::WriteMesh { .. } => false,
             };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             if did_run {
@@ -320,6 +326,40 @@ pub fn run(
                         .and_then(|v| v.as_u64())
                         .unwrap_or(0);
                     nr.metrics.insert("files".into(), (files + n as u64).into());
+                }
+                Stage::WriteMesh {
+                    input,
+                    dir,
+                    format,
+                    every,
+                } if (done as u32).is_multiple_of(*every) => {
+                    let t = Instant::now();
+                    let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
+                        unreachable!("edges are typed")
+                    };
+                    let path = match format {
+                        MeshFormat::Obj => {
+                            let p = dir.join(format!("{input}_{frame:04}.obj"));
+                            imprint_render::mesh_io::write_obj(&p, mesh, &Default::default())?;
+                            p
+                        }
+                        MeshFormat::Ply => {
+                            let p = dir.join(format!("{input}_{frame:04}.ply"));
+                            imprint_render::mesh_io::write_ply(&p, mesh)?;
+                            p
+                        }
+                    };
+                    report.files_written += 1;
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.metrics
+                        .insert("last".into(), path.display().to_string().into());
+                    let files = nr
+                        .metrics
+                        .get("files")
+                        .and_then(|v| v.as_u64())
+                        .unwrap_or(0);
+                    nr.metrics.insert("files".into(), (files + 1).into());
                 }
                 _ => {}
             }
@@ -467,6 +507,12 @@ fn build_stages(
                     builder: Default::default(),
                 }
             }
+            NodeSpec::WriteMesh(w) => Stage::WriteMesh {
+                input: w.mesh.clone(),
+                dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),
+                format: w.format,
+                every: w.every,
+            },
             NodeSpec::WriteField(w) => Stage::WriteField {
                 input: w.field.clone(),
                 dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),

@@ -264,8 +264,9 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 return Err(fail("measure", "Every(k) needs k >= 1".into()));
             }
         }
-        NodeSpec::WriteField(w) => {
-            if w.every == 0 {
+        NodeSpec::WriteField(crate::schema::WriteFieldNode { every, .. })
+        | NodeSpec::WriteMesh(crate::schema::WriteMeshNode { every, .. }) => {
+            if *every == 0 {
                 return Err(fail("every", "every must be at least 1".into()));
             }
         }

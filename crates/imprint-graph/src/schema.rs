@@ -48,6 +48,8 @@ pub enum NodeSpec {
     DistanceField(FieldNode),
     /// Writes a field per frame as .npy + JSON and PNG slices (input: DistanceField; a writer).
     WriteField(WriteFieldNode),
+    /// Writes a mesh per frame as OBJ or PLY, for other tools (input: Mesh; a writer).
+    WriteMesh(WriteMeshNode),
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -134,6 +136,29 @@ pub struct WriteFieldNode {
     pub every: u32,
 }
 
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WriteMeshNode {
+    /// The Mesh node to write.
+    pub mesh: String,
+    /// Folder under the run's output folder (default: the node's name).
+    #[serde(default)]
+    pub dir: Option<String>,
+    #[serde(default)]
+    pub format: MeshFormat,
+    /// Write every k-th frame (1 = every frame).
+    #[serde(default = "one")]
+    pub every: u32,
+}
+
+/// File format of `WriteMesh`: OBJ (positions, normals, UVs where they exist) or binary PLY.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+pub enum MeshFormat {
+    #[default]
+    Obj,
+    Ply,
+}
+
 fn yes() -> bool {
     true
 }
@@ -166,6 +191,7 @@ impl NodeSpec {
             NodeSpec::Voxelize(_) => "Voxelize",
             NodeSpec::DistanceField(_) => "DistanceField",
             NodeSpec::WriteField(_) => "WriteField",
+            NodeSpec::WriteMesh(_) => "WriteMesh",
         }
     }
 
@@ -176,6 +202,7 @@ impl NodeSpec {
             NodeSpec::Voxelize(v) => vec![("mesh", &v.mesh, PortType::Mesh)],
             NodeSpec::DistanceField(f) => vec![("boundary", &f.boundary, PortType::Boundary)],
             NodeSpec::WriteField(w) => vec![("field", &w.field, PortType::DistanceField)],
+            NodeSpec::WriteMesh(w) => vec![("mesh", &w.mesh, PortType::Mesh)],
         }
     }
 
@@ -185,7 +212,7 @@ impl NodeSpec {
             NodeSpec::Mesh(_) => Some(PortType::Mesh),
             NodeSpec::Voxelize(_) => Some(PortType::Boundary),
             NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
-            NodeSpec::WriteField(_) => None,
+            NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => None,
         }
     }
 

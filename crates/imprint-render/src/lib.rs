@@ -5,6 +5,8 @@
 //! - [`colormap`]: viridis (sequential) and RdBu (diverging) colour tables;
 //! - [`font`]: a hand-made 5x7 bitmap font for labels, so pictures need no font files;
 //! - [`slice`]: a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
+//! - [`frame`]: the CPU frame renderer (meshes, field slices, sun + ambient, ground grid,
+//!   wireframe, supersampling);
 //! - [`png`]: PNG output.
 //!
 //! Every file is written through `imprint_core::io::atomic_write`: a reader never finds a
@@ -13,12 +15,16 @@
 pub mod colormap;
 pub mod field_io;
 pub mod font;
+pub mod frame;
+pub mod heightmap;
+pub mod mesh_io;
 pub mod npy;
 pub mod png;
 pub mod slice;
 
 pub use colormap::Colormap;
 pub use field_io::{FieldMeta, write_field};
+pub use frame::{GroundGrid, Lights, Object, RenderOptions, Scene, orbit, render_cpu};
 pub use npy::{read_npy_f32, write_npy_f32};
 pub use png::write_png;
 pub use slice::{Axis, SliceIndex, SliceOptions, render_field_slice, write_field_slice};
