@@ -276,6 +276,9 @@ fn describe(plan: &Plan) -> String {
                 imprint_graph::schema::NodeSpec::WriteMesh(w) if w.every > 1 => {
                     format!("every {} frames", w.every)
                 }
+                imprint_graph::schema::NodeSpec::Render(r) if r.every > 1 => {
+                    format!("every {} frames", r.every)
+                }
                 _ => "every frame".into(),
             }
         } else if statics.contains(name) {

@@ -429,3 +429,38 @@ fn write_mesh_writes_frames_other_tools_can_read() {
     let (a, b) = (m0.bounds(), teapot.bounds());
     assert!((a.min - b.min).length() < 1e-5 && (a.max - b.max).length() < 1e-5);
 }
+
+#[test]
+fn render_writes_frames_that_show_the_scene() {
+    let nodes = format!(
+        "{}\n        \"pics\": Render(objects: [Mesh(mesh: \"m\"), FieldSlice(field: \"field\")], camera: Orbit(distance: 12, elevation: 30), width: 64, height: 48, samples: 1, out: \"pics/f{{frame:04}}.png\"),",
+        good_nodes(&teapot())
+    );
+    let c = case(&nodes);
+    let out = imprint(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for frame in ["0000", "0001"] {
+        let img = image::open(c.dir.path().join(format!("o/pics/f{frame}.png")))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(img.dimensions(), (64, 48));
+        // The background is one flat colour; the teapot and its slice cover part of the view.
+        let bg = *img.get_pixel(0, 0);
+        let covered = img.pixels().filter(|p| **p != bg).count();
+        assert!(
+            covered > 64 * 48 / 20 && covered < 64 * 48,
+            "{covered} pixels differ from the background"
+        );
+    }
+    // A pattern without {frame} would overwrite itself: refused before running.
+    let bad = nodes.replace("pics/f{frame:04}.png", "pics/f.png");
+    expect_invalid(&bad, &["has no {frame}"]);
+}

@@ -132,7 +132,7 @@ pub fn ron_error(src: &Source, e: &ron::error::SpannedError) -> PipelineError {
     let message = e.code.to_string();
     let help = if message.contains("unknown variant") || message.contains("Unexpected variant") {
         Some(
-            "node kinds are: Mesh, Voxelize, DistanceField, WriteField, WriteMesh (see README: writing a pipeline)"
+            "node kinds are: Mesh, Voxelize, DistanceField, WriteField, WriteMesh, Render (see README: writing a pipeline)"
                 .to_string(),
         )
     } else if message.contains("Unexpected field") || message.contains("unknown field") {

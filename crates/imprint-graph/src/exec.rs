@@ -7,10 +7,13 @@
 
 use crate::plan::Plan;
 use crate::report::{NodeReport, Report};
-use crate::schema::{Backend, GridChoice, Measure, MeshFormat, NodeSpec};
+use crate::schema::{
+    Backend, CameraSpec, GridChoice, Measure, MeshFormat, NodeSpec, RenderNode, RenderObject,
+};
 use imprint_core::bvh::Bvh;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, Mesh};
 use imprint_gpu::GpuContext;
+use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, render_cpu};
 use imprint_render::slice::SliceOptions;
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
@@ -83,6 +86,10 @@ enum Stage {
         dir: PathBuf,
         format: MeshFormat,
         every: u32,
+    },
+    Render {
+        node: Box<RenderNode>,
+        out: PathBuf,
     },
 }
 
@@ -233,7 +240,7 @@ pub fn run(
                         false
                     }
                 }
-                Stage::WriteField { .. } | Stage::WriteMesh { .. } => false,
+                Stage::WriteField { .. } | Stage::WriteMesh { .. } | Stage::Render { .. } => false,
             };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             if did_run {
@@ -361,6 +368,49 @@ pub fn run(
                         .unwrap_or(0);
                     nr.metrics.insert("files".into(), (files + 1).into());
                 }
+                Stage::Render { node, out } => {
+                    if (done as u32).is_multiple_of(node.every) {
+                        let t = Instant::now();
+                        let mut scene = Scene {
+                            ground_grid: node.ground_grid.then(GroundGrid::default),
+                            ..Default::default()
+                        };
+                        for o in &node.objects {
+                            scene.objects.push(match o {
+                                RenderObject::Mesh {
+                                    mesh,
+                                    color,
+                                    wireframe,
+                                } => {
+                                    let Some(Value::Mesh(m)) = values.get(mesh.as_str()) else {
+                                        unreachable!("edges are typed")
+                                    };
+                                    Object::Mesh {
+                                        mesh: m.clone(),
+                                        color: [color.0, color.1, color.2],
+                                        wireframe: *wireframe,
+                                    }
+                                }
+                                RenderObject::FieldSlice { field, axis, index } => {
+                                    Object::FieldSlice {
+                                        field: cpu_field(field, &values, &mut cpu_fields, gpu)?,
+                                        axis: *axis,
+                                        index: *index,
+                                        colormap: Default::default(),
+                                    }
+                                }
+                            });
+                        }
+                        let img = render_cpu(&scene, &render_options(node, time)?)?;
+                        let path = out.join(frame_path(&node.out, frame));
+                        imprint_render::png::write_png(&path, &img)?;
+                        report.files_written += 1;
+                        let nr = report.nodes.get_mut(name).expect("report");
+                        nr.record(t.elapsed().as_secs_f64() * 1e3);
+                        nr.metrics
+                            .insert("last".into(), path.display().to_string().into());
+                    }
+                }
                 _ => {}
             }
         }
@@ -392,6 +442,39 @@ fn write_slice(
     ));
     imprint_render::slice::write_field_slice(&path, field, &opts)?;
     Ok(())
+}
+
+/// The renderer's options for a Render node at `time` (the orbit spins with time).
+pub fn render_options(node: &RenderNode, time: f32) -> imprint_core::Result<RenderOptions> {
+    let v = |t: (f32, f32, f32)| glam::Vec3::new(t.0, t.1, t.2);
+    let camera = match node.camera {
+        CameraSpec::Orbit {
+            target,
+            distance,
+            elevation,
+            azimuth,
+            fov,
+            spin,
+        } => orbit(v(target), distance, elevation, azimuth + spin * time, fov)?,
+        CameraSpec::LookAt { eye, target, fov } => {
+            imprint_core::Camera::perspective(v(eye), v(target), glam::Vec3::Y, fov)?
+        }
+    };
+    let opts = RenderOptions {
+        width: node.width,
+        height: node.height,
+        samples: node.samples,
+        camera,
+    };
+    opts.validate()?;
+    Ok(opts)
+}
+
+/// `frames/{frame:04}.png` for frame 12 is `frames/0012.png`; `{frame}` is unpadded.
+fn frame_path(pattern: &str, frame: u32) -> String {
+    pattern
+        .replace("{frame:04}", &format!("{frame:04}"))
+        .replace("{frame}", &frame.to_string())
 }
 
 /// The CPU copy of a field node's value this frame (read back once per frame if on the GPU).
@@ -507,6 +590,10 @@ fn build_stages(
                     builder: Default::default(),
                 }
             }
+            NodeSpec::Render(r) => Stage::Render {
+                node: Box::new(r.clone()),
+                out: opts.out.clone(),
+            },
             NodeSpec::WriteMesh(w) => Stage::WriteMesh {
                 input: w.mesh.clone(),
                 dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),

@@ -264,6 +264,27 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 return Err(fail("measure", "Every(k) needs k >= 1".into()));
             }
         }
+        NodeSpec::Render(r) => {
+            if r.every == 0 {
+                return Err(fail("every", "every must be at least 1".into()));
+            }
+            if !r.out.contains("{frame") {
+                return Err(fail(
+                    "out",
+                    format!(
+                        "out pattern '{}' has no {{frame}} or {{frame:04}}: every frame would overwrite the last",
+                        r.out
+                    ),
+                ));
+            }
+            if r.objects.is_empty() {
+                return Err(fail(
+                    "objects",
+                    "a Render node needs at least one object".into(),
+                ));
+            }
+            crate::exec::render_options(r, 0.0).map_err(|e| fail("camera", e.to_string()))?;
+        }
         NodeSpec::WriteField(crate::schema::WriteFieldNode { every, .. })
         | NodeSpec::WriteMesh(crate::schema::WriteMeshNode { every, .. }) => {
             if *every == 0 {

@@ -50,6 +50,8 @@ pub enum NodeSpec {
     WriteField(WriteFieldNode),
     /// Writes a mesh per frame as OBJ or PLY, for other tools (input: Mesh; a writer).
     WriteMesh(WriteMeshNode),
+    /// Renders meshes and field slices to a PNG per frame (inputs: Mesh, DistanceField; a writer).
+    Render(RenderNode),
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -159,6 +161,103 @@ pub enum MeshFormat {
     Ply,
 }
 
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderNode {
+    /// What to draw, nearest surface wins.
+    pub objects: Vec<RenderObject>,
+    pub camera: CameraSpec,
+    #[serde(default = "default_width")]
+    pub width: u32,
+    #[serde(default = "default_height")]
+    pub height: u32,
+    /// Supersampling per axis (1..=4): the CPU renderer's anti-aliasing.
+    #[serde(default = "two")]
+    pub samples: u32,
+    /// A grid on the ground plane y = 0, for orientation.
+    #[serde(default = "yes")]
+    pub ground_grid: bool,
+    /// File pattern under the run's output folder; `{frame:04}` (or `{frame}`) is replaced.
+    #[serde(default = "default_pattern")]
+    pub out: String,
+    /// Render every k-th frame (1 = every frame).
+    #[serde(default = "one")]
+    pub every: u32,
+}
+
+fn default_width() -> u32 {
+    640
+}
+fn default_height() -> u32 {
+    480
+}
+fn two() -> u32 {
+    2
+}
+fn default_pattern() -> String {
+    "frames/{frame:04}.png".into()
+}
+
+/// One thing a Render node draws.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum RenderObject {
+    /// A Mesh node's mesh, lit, in a linear RGB colour (0..1).
+    Mesh {
+        mesh: String,
+        #[serde(default = "default_color")]
+        color: (f32, f32, f32),
+        #[serde(default)]
+        wireframe: bool,
+    },
+    /// A plane of a DistanceField node's grid, colour-mapped (0 at the surface, band at the edge).
+    FieldSlice {
+        field: String,
+        #[serde(default = "default_axis")]
+        axis: imprint_render::slice::Axis,
+        #[serde(default)]
+        index: imprint_render::slice::SliceIndex,
+    },
+}
+
+fn default_color() -> (f32, f32, f32) {
+    (0.8, 0.45, 0.35)
+}
+fn default_axis() -> imprint_render::slice::Axis {
+    imprint_render::slice::Axis::Z
+}
+
+/// Where the camera is. Angles in degrees; `spin` turns an orbit at degrees per second.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum CameraSpec {
+    Orbit {
+        #[serde(default)]
+        target: (f32, f32, f32),
+        distance: f32,
+        #[serde(default = "default_elevation")]
+        elevation: f32,
+        #[serde(default)]
+        azimuth: f32,
+        #[serde(default = "default_fov")]
+        fov: f32,
+        #[serde(default)]
+        spin: f32,
+    },
+    LookAt {
+        eye: (f32, f32, f32),
+        #[serde(default)]
+        target: (f32, f32, f32),
+        #[serde(default = "default_fov")]
+        fov: f32,
+    },
+}
+
+fn default_elevation() -> f32 {
+    20.0
+}
+fn default_fov() -> f32 {
+    40.0
+}
+
 fn yes() -> bool {
     true
 }
@@ -192,6 +291,7 @@ impl NodeSpec {
             NodeSpec::DistanceField(_) => "DistanceField",
             NodeSpec::WriteField(_) => "WriteField",
             NodeSpec::WriteMesh(_) => "WriteMesh",
+            NodeSpec::Render(_) => "Render",
         }
     }
 
@@ -203,6 +303,16 @@ impl NodeSpec {
             NodeSpec::DistanceField(f) => vec![("boundary", &f.boundary, PortType::Boundary)],
             NodeSpec::WriteField(w) => vec![("field", &w.field, PortType::DistanceField)],
             NodeSpec::WriteMesh(w) => vec![("mesh", &w.mesh, PortType::Mesh)],
+            NodeSpec::Render(r) => r
+                .objects
+                .iter()
+                .map(|o| match o {
+                    RenderObject::Mesh { mesh, .. } => ("objects", mesh.as_str(), PortType::Mesh),
+                    RenderObject::FieldSlice { field, .. } => {
+                        ("objects", field.as_str(), PortType::DistanceField)
+                    }
+                })
+                .collect(),
         }
     }
 
@@ -212,7 +322,7 @@ impl NodeSpec {
             NodeSpec::Mesh(_) => Some(PortType::Mesh),
             NodeSpec::Voxelize(_) => Some(PortType::Boundary),
             NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
-            NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => None,
+            NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) | NodeSpec::Render(_) => None,
         }
     }
 
