@@ -13,6 +13,18 @@ fn imprint(args: &[&str], cwd: &Path) -> Output {
         .expect("imprint runs")
 }
 
+/// Runs `imprint` and expects success, showing its stderr otherwise.
+fn run_ok(args: &[&str], cwd: &Path) -> Output {
+    let out = imprint(args, cwd);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 fn assets() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/meshes"))
 }
@@ -245,7 +257,7 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
     let c = case(&good_nodes(&teapot()));
     let f = c.file.to_str().unwrap();
     for out_dir in ["o1", "o2"] {
-        let out = imprint(
+        run_ok(
             &[
                 "run",
                 f,
@@ -255,12 +267,6 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
                 "vox.grid.resolution=20",
             ],
             c.dir.path(),
-        );
-        assert_eq!(
-            out.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
         );
     }
     let d = c.dir.path();
@@ -295,7 +301,7 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
 fn field_command_computes_one_mesh() {
     let dir = tempfile::tempdir().unwrap();
     let mesh = assets().join("suzanne.obj");
-    let out = imprint(
+    run_ok(
         &[
             "field",
             mesh.to_str().unwrap(),
@@ -309,12 +315,6 @@ fn field_command_computes_one_mesh() {
             "f",
         ],
         dir.path(),
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
     let meta: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("f/field_0000_field.json")).unwrap())
@@ -339,15 +339,9 @@ fn field_command_computes_one_mesh() {
 fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
     let c = case(&good_nodes(&teapot()));
     let f = c.file.to_str().unwrap();
-    let cpu = imprint(
+    run_ok(
         &["run", f, "--out", "cpu", "--backend", "cpu"],
         c.dir.path(),
-    );
-    assert_eq!(
-        cpu.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&cpu.stderr)
     );
     let gpu = imprint(
         &["run", f, "--out", "gpu", "--backend", "gpu"],
@@ -403,15 +397,9 @@ fn write_mesh_writes_frames_other_tools_can_read() {
         good_nodes(&teapot())
     );
     let c = case(&nodes);
-    let out = imprint(
+    run_ok(
         &["run", c.file.to_str().unwrap(), "--out", "o"],
         c.dir.path(),
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
     let d = c.dir.path().join("o");
     let teapot = imprint_core::Mesh::load_obj(&assets().join("teapot.obj")).unwrap();
@@ -437,15 +425,9 @@ fn render_writes_frames_that_show_the_scene() {
         good_nodes(&teapot())
     );
     let c = case(&nodes);
-    let out = imprint(
+    run_ok(
         &["run", c.file.to_str().unwrap(), "--out", "o"],
         c.dir.path(),
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
     );
     for frame in ["0000", "0001"] {
         let img = image::open(c.dir.path().join(format!("o/pics/f{frame}.png")))

@@ -84,6 +84,34 @@ pub struct DistanceField {
 impl DistanceField {
     pub const FAR: u32 = u32::MAX;
 
+    /// An exact field from a closest-point function (for references, tests and examples):
+    /// every cell whose closest surface point is within the band keeps it as its own boundary
+    /// point; the others are far.
+    pub fn from_closest_points(spec: GridSpec, band: f32, closest: impl Fn(Vec3) -> Vec3) -> Self {
+        let far = band * spec.cell;
+        let mut dist = vec![far; spec.len()];
+        let mut nearest = vec![Self::FAR; spec.len()];
+        let mut points = Vec::new();
+        for i in 0..spec.len() {
+            let x = spec.center(spec.coords(i));
+            let p = closest(x);
+            let d = (p - x).length();
+            if d <= far {
+                dist[i] = d;
+                nearest[i] = points.len() as u32;
+                points.push(p);
+            }
+        }
+        DistanceField {
+            spec,
+            band,
+            dist,
+            nearest,
+            points: Arc::new(points),
+            faces: None,
+        }
+    }
+
     /// The distance stored in far cells: the band's half-width in world units.
     pub fn far_value(&self) -> f32 {
         self.band * self.spec.cell

@@ -18,6 +18,7 @@
 //!   the result is bit-identical for any number of threads.
 
 use crate::camera::{Camera, Frame};
+use crate::geom::barycentric;
 use crate::{Error, Mesh, Result};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -544,20 +545,6 @@ pub fn rasterize_triangle_ids(
     opts: &RasterOptions,
 ) -> Result<(DepthMap, Vec<u32>)> {
     rasterize_impl(mesh, camera, width, height, opts, true)
-}
-
-/// Barycentric coordinates of `p` (assumed on the triangle's plane) in triangle `t`.
-fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> [f32; 3] {
-    let (v0, v1, v2) = (b - a, c - a, p - a);
-    let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
-    let (d20, d21) = (v2.dot(v0), v2.dot(v1));
-    let den = d00 * d11 - d01 * d01;
-    if den == 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d11 * d20 - d01 * d21) / den;
-    let w = (d00 * d21 - d01 * d20) / den;
-    [1.0 - v - w, v, w]
 }
 
 /// Interpolates a per-vertex attribute over the visible surface: for each covered pixel, the

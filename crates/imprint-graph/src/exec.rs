@@ -368,48 +368,44 @@ pub fn run(
                         .unwrap_or(0);
                     nr.metrics.insert("files".into(), (files + 1).into());
                 }
-                Stage::Render { node, out } => {
-                    if (done as u32).is_multiple_of(node.every) {
-                        let t = Instant::now();
-                        let mut scene = Scene {
-                            ground_grid: node.ground_grid.then(GroundGrid::default),
-                            ..Default::default()
-                        };
-                        for o in &node.objects {
-                            scene.objects.push(match o {
-                                RenderObject::Mesh {
-                                    mesh,
-                                    color,
-                                    wireframe,
-                                } => {
-                                    let Some(Value::Mesh(m)) = values.get(mesh.as_str()) else {
-                                        unreachable!("edges are typed")
-                                    };
-                                    Object::Mesh {
-                                        mesh: m.clone(),
-                                        color: [color.0, color.1, color.2],
-                                        wireframe: *wireframe,
-                                    }
+                Stage::Render { node, out } if (done as u32).is_multiple_of(node.every) => {
+                    let t = Instant::now();
+                    let mut scene = Scene {
+                        ground_grid: node.ground_grid.then(GroundGrid::default),
+                        ..Default::default()
+                    };
+                    for o in &node.objects {
+                        scene.objects.push(match o {
+                            RenderObject::Mesh {
+                                mesh,
+                                color,
+                                wireframe,
+                            } => {
+                                let Some(Value::Mesh(m)) = values.get(mesh.as_str()) else {
+                                    unreachable!("edges are typed")
+                                };
+                                Object::Mesh {
+                                    mesh: m.clone(),
+                                    color: [color.0, color.1, color.2],
+                                    wireframe: *wireframe,
                                 }
-                                RenderObject::FieldSlice { field, axis, index } => {
-                                    Object::FieldSlice {
-                                        field: cpu_field(field, &values, &mut cpu_fields, gpu)?,
-                                        axis: *axis,
-                                        index: *index,
-                                        colormap: Default::default(),
-                                    }
-                                }
-                            });
-                        }
-                        let img = render_cpu(&scene, &render_options(node, time)?)?;
-                        let path = out.join(frame_path(&node.out, frame));
-                        imprint_render::png::write_png(&path, &img)?;
-                        report.files_written += 1;
-                        let nr = report.nodes.get_mut(name).expect("report");
-                        nr.record(t.elapsed().as_secs_f64() * 1e3);
-                        nr.metrics
-                            .insert("last".into(), path.display().to_string().into());
+                            }
+                            RenderObject::FieldSlice { field, axis, index } => Object::FieldSlice {
+                                field: cpu_field(field, &values, &mut cpu_fields, gpu)?,
+                                axis: *axis,
+                                index: *index,
+                                colormap: Default::default(),
+                            },
+                        });
                     }
+                    let img = render_cpu(&scene, &render_options(node, time)?)?;
+                    let path = out.join(frame_path(&node.out, frame));
+                    imprint_render::png::write_png(&path, &img)?;
+                    report.files_written += 1;
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.metrics
+                        .insert("last".into(), path.display().to_string().into());
                 }
                 _ => {}
             }

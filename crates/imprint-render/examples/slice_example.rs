@@ -8,7 +8,6 @@
 use imprint_core::glam::{UVec3, Vec3};
 use imprint_core::{DistanceField, GridSpec};
 use imprint_render::slice::{Axis, SliceIndex, SliceOptions, write_field_slice};
-use std::sync::Arc;
 
 fn main() -> imprint_core::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -41,35 +40,14 @@ fn main() -> imprint_core::Result<()> {
         (Vec3::new(0.76, 0.82, 0.5), 0.09),
     ];
 
-    let mut dist = vec![band * spec.cell; spec.len()];
-    let mut nearest = vec![DistanceField::FAR; spec.len()];
-    let mut points = Vec::new();
-    for i in 0..spec.len() {
-        let x = spec.center(spec.coords(i));
-        // The closest point on the union is the closest of the closest points.
-        let (d, p) = spheres
+    // The closest point on the union is the closest of the closest points.
+    let field = DistanceField::from_closest_points(spec, band, |x| {
+        spheres
             .iter()
-            .map(|&(c, r)| {
-                let dir = (x - c).try_normalize().unwrap_or(Vec3::X);
-                let p = c + r * dir;
-                ((x - p).length(), p)
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .unwrap();
-        if d <= band * spec.cell {
-            dist[i] = d;
-            nearest[i] = points.len() as u32;
-            points.push(p);
-        }
-    }
-    let field = DistanceField {
-        spec,
-        band,
-        dist,
-        nearest,
-        points: Arc::new(points),
-        faces: None,
-    };
+            .map(|&(c, r)| c + r * (x - c).try_normalize().unwrap_or(Vec3::X))
+            .min_by(|p, q| (*p - x).length().total_cmp(&(*q - x).length()))
+            .unwrap()
+    });
 
     let opts = SliceOptions {
         title: Some("spheres  frame 0000".into()),

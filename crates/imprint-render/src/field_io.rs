@@ -144,33 +144,13 @@ mod tests {
     use crate::npy::read_npy_f32;
     use imprint_core::GridSpec;
     use imprint_core::glam::{UVec3, Vec3};
-    use std::sync::Arc;
 
     /// A field on a 5x4x3 grid: distance to the plane x = 1.3, band 2 cells of 0.5.
     fn plane_field() -> DistanceField {
         let spec = GridSpec::new(Vec3::new(0.25, -1.0, 2.0), 0.5, UVec3::new(5, 4, 3)).unwrap();
         let band = 2.0;
         let plane_x = 1.3;
-        let mut dist = vec![band * spec.cell; spec.len()];
-        let mut nearest = vec![DistanceField::FAR; spec.len()];
-        let mut points = Vec::new();
-        for i in 0..spec.len() {
-            let c = spec.center(spec.coords(i));
-            let d = (c.x - plane_x).abs();
-            if d <= band * spec.cell {
-                dist[i] = d;
-                nearest[i] = points.len() as u32;
-                points.push(Vec3::new(plane_x, c.y, c.z));
-            }
-        }
-        DistanceField {
-            spec,
-            band,
-            dist,
-            nearest,
-            points: Arc::new(points),
-            faces: None,
-        }
+        DistanceField::from_closest_points(spec, band, |c| Vec3::new(plane_x, c.y, c.z))
     }
 
     #[test]

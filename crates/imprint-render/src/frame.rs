@@ -29,6 +29,7 @@ use crate::slice::{Axis, FAR_GREY, SliceIndex};
 use glam::{UVec3, Vec3};
 use image::{Rgb, RgbImage};
 use imprint_core::camera::Camera;
+use imprint_core::geom::barycentric;
 use imprint_core::raster::{DepthMap, MAX_SIZE, RasterOptions, rasterize_triangle_ids};
 use imprint_core::{DistanceField, Error, Mesh, Result};
 use std::sync::Arc;
@@ -490,20 +491,6 @@ fn slice_color(field: &DistanceField, axis: Axis, index: u32, colormap: Colormap
         srgb_to_linear(rgb[1]),
         srgb_to_linear(rgb[2]),
     )
-}
-
-/// Barycentric coordinates of `p` (on the triangle's plane) in triangle `[a, b, c]`.
-fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> [f32; 3] {
-    let (v0, v1, v2) = (b - a, c - a, p - a);
-    let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
-    let (d20, d21) = (v2.dot(v0), v2.dot(v1));
-    let den = d00 * d11 - d01 * d01;
-    if den == 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d11 * d20 - d01 * d21) / den;
-    let w = (d00 * d21 - d01 * d20) / den;
-    [1.0 - v - w, v, w]
 }
 
 /// Depth-tested line drawing into the linear sample buffer.

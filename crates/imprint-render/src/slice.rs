@@ -498,34 +498,13 @@ mod tests {
     use super::*;
     use crate::colormap::viridis;
     use imprint_core::glam::Vec3;
-    use std::sync::Arc;
 
     /// Distance to the plane y = y0 on an 8x6x4 grid of unit cells at the origin, band 2:
     /// rows j with |j - y0| <= 2 are in band. Each in-band cell has its own boundary point
     /// (the foot of the perpendicular), as an exact field would.
     fn plane_field(y0: f32) -> DistanceField {
         let spec = GridSpec::new(Vec3::ZERO, 1.0, UVec3::new(8, 6, 4)).unwrap();
-        let band = 2.0;
-        let mut dist = vec![band; spec.len()];
-        let mut nearest = vec![DistanceField::FAR; spec.len()];
-        let mut points = Vec::new();
-        for i in 0..spec.len() {
-            let c = spec.center(spec.coords(i));
-            let d = (c.y - y0).abs();
-            if d <= band {
-                dist[i] = d;
-                nearest[i] = points.len() as u32;
-                points.push(Vec3::new(c.x, y0, c.z));
-            }
-        }
-        DistanceField {
-            spec,
-            band,
-            dist,
-            nearest,
-            points: Arc::new(points),
-            faces: None,
-        }
+        DistanceField::from_closest_points(spec, 2.0, |c| Vec3::new(c.x, y0, c.z))
     }
 
     fn bare(axis: Axis, index: SliceIndex, ppc: u32) -> SliceOptions {

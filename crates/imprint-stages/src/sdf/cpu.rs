@@ -264,10 +264,7 @@ fn splat_point_window(
             let d_row: &mut [f32; WINDOW] = (&mut d2s[row..row + WINDOW]).try_into().unwrap();
             let n_row: &mut [u32; WINDOW] = (&mut near[row..row + WINDOW]).try_into().unwrap();
             for k in 0..WINDOW {
-                let d2 = dx2[k] + dyz2;
-                let closer = d2 < d_row[k];
-                d_row[k] = if closer { d2 } else { d_row[k] };
-                n_row[k] = if closer { pi } else { n_row[k] };
+                keep_nearer(&mut d_row[k], &mut n_row[k], dx2[k] + dyz2, pi);
             }
         }
     }
@@ -314,17 +311,22 @@ fn splat_point(
             let row = (z - z0) * nx * ny + y * nx;
             let d_row = &mut d2s[row + xlo..=row + xhi];
             let n_row = &mut near[row + xlo..=row + xhi];
-            // Branch-free select: the compiler turns it into blends, and the many near-equal
-            // candidates of neighbouring points do not cost mispredictions.
             for (k, (d, n)) in d_row.iter_mut().zip(n_row.iter_mut()).enumerate() {
                 let dx = (xlo + k) as f32 - p.x;
-                let d2 = dx * dx + dyz2;
-                let closer = d2 < *d;
-                *d = if closer { d2 } else { *d };
-                *n = if closer { pi } else { *n };
+                keep_nearer(d, n, dx * dx + dyz2, pi);
             }
         }
     }
+}
+
+/// Keeps point `pi` at squared distance `d2` if it is strictly nearer than the cell's current
+/// point: a branch-free select (the many near-equal candidates of neighbouring points cost no
+/// mispredictions, and fixed-width rows vectorise); strict, so ties keep the smaller index.
+#[inline(always)]
+fn keep_nearer(d: &mut f32, n: &mut u32, d2: f32, pi: u32) {
+    let closer = d2 < *d;
+    *d = if closer { d2 } else { *d };
+    *n = if closer { pi } else { *n };
 }
 
 /// The band half-width must be a finite number of cells > 0.
