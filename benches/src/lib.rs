@@ -1,5 +1,7 @@
 //! Shared pieces of the benchmark harness: timing, machine description, baselines, GPU table.
 
+pub mod render;
+
 use imprint_core::{DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;
 use std::fmt::Write;

@@ -1,11 +1,16 @@
 //! The time-against-error harness behind BENCHMARKS.md.
 //!
-//!     cargo run --release -p imprint-benches --bin harness -- [--repeat N] [--out BENCHMARKS.md]
+//!     cargo run --release -p imprint-benches --bin harness -- [--only a,b] [--repeat N] [--out BENCHMARKS.md]
 //!
-//! Tables: (1) H Table 1 at 128^3, a = 3 on teapot, bunny and cow, both boundary variants;
-//! (2) one shape at 10k, 100k and 1M triangles (H's claim: field cost follows area, not
-//! triangle count); (3) the same meshes and grid through OpenVDB and Open3D, in the same run,
-//! via benches/compare/baselines.py; (4) the GPU path when an adapter exists.
+//! Sections (see `SECTIONS`): `field` — (1) H Table 1 at 128^3, a = 3 on teapot, bunny and
+//! cow, both boundary variants, (2) one shape at 10k, 100k and 1M triangles (H's claim: field
+//! cost follows area, not triangle count); `baselines` — (3) the same meshes and grid through
+//! OpenVDB and Open3D, in the same run, via benches/compare/baselines.py; `gpu` — (4) the GPU
+//! path when an adapter exists; `render` — (5) frames and depth maps.
+//!
+//! Each section is written to `benches/results/<name>.md` with its own date, machine and load,
+//! so one section can be re-measured without re-running (or losing) the others;
+//! BENCHMARKS.md is assembled from all of them plus `benches/notes.md`.
 //! Every time is a median of `repeat` runs after one warm-up, with the error it costs.
 
 use imprint_benches::*;
@@ -17,6 +22,14 @@ use imprint_stages::voxel::cpu::Voxelizer;
 use std::fmt::Write;
 use std::path::PathBuf;
 
+/// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
+const SECTIONS: [(&str, &str); 4] = [
+    ("field", "distance fields on the CPU: H Table 1 and triangle-count scaling"),
+    ("baselines", "the same fields through OpenVDB and Open3D, same run"),
+    ("gpu", "the GPU voxelise + field path"),
+    ("render", "frames and depth maps, CPU and GPU"),
+];
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let arg = |k: &str| {
@@ -27,30 +40,116 @@ fn main() {
     };
     let repeat: usize = arg("--repeat").map_or(15, |s| s.parse().expect("--repeat N"));
     let out = PathBuf::from(arg("--out").unwrap_or_else(|| "BENCHMARKS.md".into()));
-    let skip_baselines = args.iter().any(|a| a == "--no-baselines");
+    let only: Vec<String> = arg("--only").map_or_else(
+        || SECTIONS.iter().map(|s| s.0.to_string()).collect(),
+        |s| s.split(',').map(str::to_string).collect(),
+    );
+    for o in &only {
+        assert!(
+            SECTIONS.iter().any(|s| s.0 == o),
+            "--only {o}: sections are {:?}",
+            SECTIONS.map(|s| s.0)
+        );
+    }
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let results = root.join("benches/results");
 
+    let mut totals = Vec::new();
+    for (name, _) in SECTIONS {
+        if !only.iter().any(|o| o == name) {
+            continue;
+        }
+        let machine = Machine::detect();
+        let body = match name {
+            "field" => field_section(&root, repeat, &mut totals),
+            "baselines" => {
+                if totals.is_empty() {
+                    totals = ours_for_baselines(&root, repeat);
+                }
+                format!(
+                    "## 3. Against what users would pick instead (same meshes, same grid, same run)\n\n{}",
+                    baselines(&root, &totals, repeat.min(5))
+                )
+            }
+            "gpu" => format!("## 4. GPU path\n\n{}", gpu_table(&root, repeat)),
+            "render" => imprint_benches::render::section(&root, repeat),
+            _ => unreachable!(),
+        };
+        let stamp = format!(
+            "*Measured {} with `cargo run --release -p imprint-benches --bin harness -- --only {name} \
+             --repeat {repeat}` on {}; load average {} at start, {} at end.*\n\n",
+            today(),
+            machine.describe(),
+            machine.load,
+            Machine::detect().load
+        );
+        // The section's heading line, then the stamp, then the rest.
+        let (head, rest) = body.split_once('\n').unwrap_or((&body, ""));
+        let text = format!("{head}\n\n{stamp}{}\n", rest.trim());
+        let path = results.join(format!("{name}.md"));
+        imprint_core::io::atomic_write_bytes(&path, text.as_bytes()).expect("write section");
+        eprintln!("section {name} written to {}", path.display());
+    }
+
+    // BENCHMARKS.md: every section's latest results, then the hand-written reading.
+    let mut md = String::from(
+        "# Benchmarks\n\nAssembled by `cargo run --release -p imprint-benches --bin harness` from \
+         `benches/results/*.md` (one file per section, each stamped with its date, machine and \
+         load; `--only NAME[,NAME]` re-measures some and keeps the rest) and the hand-written \
+         `benches/notes.md`. Times are medians after one warm-up; every time is given with the \
+         error it costs.\n\n",
+    );
+    for (name, what) in SECTIONS {
+        match std::fs::read_to_string(results.join(format!("{name}.md"))) {
+            Ok(t) => md += &t,
+            Err(_) => {
+                let _ = writeln!(md, "## {name}\n\nNot measured yet ({what}).\n");
+            }
+        }
+        md.push('\n');
+    }
+    if let Ok(notes) = std::fs::read_to_string(root.join("benches/notes.md")) {
+        md += &notes;
+    }
+    imprint_core::io::atomic_write_bytes(&out, md.as_bytes()).expect("write BENCHMARKS.md");
+    eprintln!("wrote {}", out.display());
+}
+
+/// Today's date (UTC), from `date`, for the section stamps.
+fn today() -> String {
+    std::process::Command::new("date")
+        .args(["-u", "+%Y-%m-%d"])
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .map_or_else(|| "(date unknown)".into(), |s| s.trim().to_string())
+}
+
+type Ours = Vec<(&'static str, f64, Mesh, imprint_core::DistanceField)>;
+
+/// Imprint's time and field on the baselines' meshes, when the field section did not run.
+fn ours_for_baselines(root: &std::path::Path, repeat: usize) -> Ours {
+    ["teapot", "stanford-bunny", "cow"]
+        .into_iter()
+        .map(|name| {
+            let mesh = load(root, name);
+            let r = measure(&mesh, 128, 3.0, BoundaryVariant::Closest, repeat);
+            (name, r.voxelise_ms + r.field_ms, mesh, r.field)
+        })
+        .collect()
+}
+
+/// Tables 1 and 2; fills `totals` for the baselines.
+fn field_section(root: &std::path::Path, repeat: usize, totals: &mut Ours) -> String {
     let mut md = String::new();
-    let machine = Machine::detect();
-    writeln!(md, "# Benchmarks\n").unwrap();
-    writeln!(
-        md,
-        "Written by `cargo run --release -p imprint-benches --bin harness -- --repeat {repeat}` \
-         on {}. Times are medians of {repeat} runs after one warm-up; errors are against the exact \
-         closest point on the triangles (BVH), over every cell whose exact distance is within the \
-         band, in cells. Load average at start: {}.\n",
-        machine.describe(),
-        machine.load
-    )
-    .unwrap();
-
-    // (1) H Table 1.
     writeln!(md, "## 1. H Table 1 at 128³, a = 3 (CPU)\n").unwrap();
     writeln!(
         md,
-        "Grid fitted to the mesh: 128 cells along the longest side of its box grown by 10% per side. \
-         H's figures (GeForce 7800 GTX, 2007) for comparison: teapot 8,753 points, (a) 14.1 ms, \
-         (b) 17.1 ms; rabbit 8,109 points, 28.1 / 15.6 ms.\n"
+        "Errors are against the exact closest point on the triangles (BVH), over every cell \
+         whose exact distance is within the band, in cells. Grid fitted to the mesh: 128 cells \
+         along the longest side of its box grown by 10% per side. H's figures (GeForce 7800 \
+         GTX, 2007) for comparison: teapot 8,753 points, (a) 14.1 ms, (b) 17.1 ms; rabbit 8,109 \
+         points, 28.1 / 15.6 ms.\n"
     )
     .unwrap();
     writeln!(md, "| mesh | triangles | variant | boundary points | voxelise ms | field ms | total ms | band cells | p99 err | max err | median err | far |").unwrap();
@@ -59,9 +158,8 @@ fn main() {
         "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     )
     .unwrap();
-    let mut totals = Vec::new();
     for name in ["teapot", "stanford-bunny", "cow"] {
-        let mesh = load(&root, name);
+        let mesh = load(root, name);
         for variant in [BoundaryVariant::Centre, BoundaryVariant::Closest] {
             let r = measure(&mesh, 128, 3.0, variant, repeat);
             writeln!(
@@ -78,7 +176,6 @@ fn main() {
         }
     }
 
-    // (2) Same shape, more triangles.
     writeln!(
         md,
         "\n## 2. One shape at 10k, 100k and 1M triangles (sphere, 128³, a = 3, Closest)\n"
@@ -106,30 +203,7 @@ fn main() {
         .unwrap();
         eprintln!("table 2: {} triangles done", mesh.triangles.len());
     }
-
-    // (3) Baselines.
-    writeln!(
-        md,
-        "\n## 3. Against what users would pick instead (same meshes, same grid, same run)\n"
-    )
-    .unwrap();
-    if skip_baselines {
-        writeln!(md, "Skipped (--no-baselines).").unwrap();
-    } else {
-        md += &baselines(&root, &totals, repeat.min(5));
-    }
-
-    // (4) GPU.
-    writeln!(md, "\n## 4. GPU path\n").unwrap();
-    md += &gpu_table(&root, repeat);
-
-    writeln!(md, "\nLoad average at end: {}.\n", Machine::detect().load).unwrap();
-    // The hand-written reading of the figures.
-    if let Ok(notes) = std::fs::read_to_string(root.join("benches/notes.md")) {
-        md += &notes;
-    }
-    imprint_core::io::atomic_write_bytes(&out, md.as_bytes()).expect("write BENCHMARKS.md");
-    eprintln!("wrote {}", out.display());
+    md
 }
 
 /// Times one mesh at one setting and measures its error.

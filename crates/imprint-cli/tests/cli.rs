@@ -337,7 +337,11 @@ fn field_command_computes_one_mesh() {
 
 #[test]
 fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
-    let c = case(&good_nodes(&teapot()));
+    let nodes = format!(
+        "{}\n        \"top\": Heightmap(mesh: \"m\", view: Below, grid: Fit(resolution: 48)),\n        \"hm\": WriteHeightmap(heights: \"top\", formats: [Exr]),\n        \"pics\": Render(objects: [Mesh(mesh: \"m\")], camera: Orbit(distance: 12, elevation: 30), width: 96, height: 64, samples: 1, ground_grid: false),",
+        good_nodes(&teapot())
+    );
+    let c = case(&nodes);
     let f = c.file.to_str().unwrap();
     run_ok(
         &["run", f, "--out", "cpu", "--backend", "cpu"],
@@ -362,7 +366,43 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
             .unwrap();
     assert_eq!(report["nodes"]["field"]["backend"], "gpu");
     assert_eq!(report["nodes"]["vox"]["backend"], "gpu");
+    assert_eq!(report["nodes"]["top"]["backend"], "gpu");
+    assert_eq!(report["nodes"]["pics"]["backend"], "gpu");
     for frame in ["0000", "0001"] {
+        // Heights from the GPU depth buffer: same coverage, same heights to 1e-4.
+        let name = format!("hm/top_{frame}.exr");
+        let a =
+            imprint_render::heightmap::read_heightmap_exr(&c.dir.path().join("cpu").join(&name))
+                .unwrap();
+        let b =
+            imprint_render::heightmap::read_heightmap_exr(&c.dir.path().join("gpu").join(&name))
+                .unwrap();
+        assert_eq!(a.dims, b.dims);
+        let worst = a
+            .heights
+            .iter()
+            .zip(&b.heights)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 1e-4, "frame {frame}: heights differ by {worst}");
+        // Frames: lit surfaces without lines or anti-aliasing agree to a level or two.
+        let name = format!("frames/{frame}.png");
+        let a = image::open(c.dir.path().join("cpu").join(&name))
+            .unwrap()
+            .to_rgb8();
+        let b = image::open(c.dir.path().join("gpu").join(&name))
+            .unwrap()
+            .to_rgb8();
+        let near = a
+            .pixels()
+            .zip(b.pixels())
+            .filter(|(p, q)| (0..3).all(|k| p.0[k].abs_diff(q.0[k]) <= 2))
+            .count();
+        assert!(
+            near as f64 >= 0.995 * (96 * 64) as f64,
+            "frame {frame}: only {near} of {} pixels agree",
+            96 * 64
+        );
         let name = format!("out/field_{frame}_dist.npy");
         let (sa, a) = imprint_render::read_npy_f32(&c.dir.path().join("cpu").join(&name)).unwrap();
         let (sb, b) = imprint_render::read_npy_f32(&c.dir.path().join("gpu").join(&name)).unwrap();
@@ -445,4 +485,71 @@ fn render_writes_frames_that_show_the_scene() {
     // A pattern without {frame} would overwrite itself: refused before running.
     let bad = nodes.replace("pics/f{frame:04}.png", "pics/f.png");
     expect_invalid(&bad, &["has no {frame}"]);
+}
+
+/// Heightmap → WriteHeightmap in every format, a rendered height field, and the run's
+/// contact sheet and GIF: the box's top face reads back as its height, the EXR and .npy
+/// exactly, the 16-bit PNG within one quantisation step.
+#[test]
+fn heightmaps_contact_sheet_and_gif() {
+    let nodes = r#"        "box": Mesh(primitive: Box(size: (1.0, 0.5, 1.0), subdivisions: 2), fit: (size: 1.0, center: (0, 0.25, 0))),
+        "top": Heightmap(mesh: "box", view: Above, grid: Explicit(origin: (-0.95, -0.95), cell: 0.1, dims: (20, 20)), empty: -1.0),
+        "hm": WriteHeightmap(heights: "top", formats: [Png16, Exr, Npy, Preview]),
+        "pics": Render(objects: [HeightField(heights: "top"), Mesh(mesh: "box")], camera: Orbit(distance: 4), width: 64, height: 48, samples: 1,
+            contact_sheet: (every: 1, columns: 2, width: 32), gif: (width: 32)),"#;
+    let c = case(nodes);
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let d = c.dir.path().join("o");
+    // Box fitted to size 1 (longest side): top face at y = 0.5 over |x|, |z| < 0.5.
+    let want = |i: u32, k: u32| {
+        let (x, z) = (-0.95 + 0.1 * i as f32, -0.95 + 0.1 * k as f32);
+        if x.abs() < 0.5 && z.abs() < 0.5 {
+            0.5
+        } else {
+            -1.0
+        }
+    };
+    for frame in ["0000", "0001"] {
+        let exr =
+            imprint_render::heightmap::read_heightmap_exr(&d.join(format!("hm/top_{frame}.exr")))
+                .unwrap();
+        let png =
+            imprint_render::heightmap::read_heightmap_png16(&d.join(format!("hm/top_{frame}.png")))
+                .unwrap();
+        let npy = imprint_render::read_npy_f32(&d.join(format!("hm/top_{frame}.npy"))).unwrap();
+        assert_eq!(exr.dims, glam::UVec2::new(20, 20));
+        let step = 1.5 / 65535.0;
+        for k in 0..20 {
+            for i in 0..20 {
+                let w = want(i, k);
+                assert!(
+                    (exr.get(i, k) - w).abs() < 1e-5,
+                    "exr ({i},{k}) {} vs {w}",
+                    exr.get(i, k)
+                );
+                assert!((png.get(i, k) - w).abs() <= step, "png ({i},{k})");
+                assert_eq!(npy.1[exr.index(i, k)], exr.get(i, k), "npy ({i},{k})");
+            }
+        }
+        assert!(d.join(format!("hm/top_{frame}_preview.png")).is_file());
+    }
+    // Contact sheet: two 32x24 tiles side by side with 4-pixel gaps.
+    let sheet = image::open(d.join("contact_sheet.png")).unwrap().to_rgb8();
+    assert_eq!(sheet.dimensions(), (4 + 2 * 36, 4 + 28));
+    // GIF: two frames, 32 pixels wide, at the run's 30 fps (3 cs, GIF's whole hundredths).
+    let mut opts = gif::DecodeOptions::new();
+    opts.set_color_output(gif::ColorOutput::RGBA);
+    let mut dec = opts
+        .read_info(std::fs::File::open(d.join("preview.gif")).unwrap())
+        .unwrap();
+    assert_eq!((dec.width(), dec.height()), (32, 24));
+    let mut n = 0;
+    while let Some(f) = dec.read_next_frame().unwrap() {
+        assert_eq!(f.delay, 3);
+        n += 1;
+    }
+    assert_eq!(n, 2);
 }

@@ -7,11 +7,14 @@
 //! - [`shader!`]: embeds a WGSL file from the workspace `shaders/` folder, the same way for
 //!   every stage;
 //! - [`GpuTimer`]: per-pass GPU timestamps where the adapter has them, wall clock otherwise;
-//! - [`test_context`]: what every GPU test calls, so a machine without a GPU skips politely.
+//! - [`test_context`]: what every GPU test calls, so a machine without a GPU skips politely;
+//! - [`raster`]: GPU depth maps ([`raster::GpuRasterizer`]) and the pieces every raster pass
+//!   shares (camera uniform, render shader modules, growing buffers, texture readback).
 //!
 //! This crate knows no stage: stages (in `imprint-stages`) own their shaders and passes.
 
 mod context;
+pub mod raster;
 mod timer;
 
 pub use context::{GpuContext, WORKGROUP_SIZE};

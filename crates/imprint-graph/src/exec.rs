@@ -8,13 +8,18 @@
 use crate::plan::Plan;
 use crate::report::{NodeReport, Report};
 use crate::schema::{
-    Backend, CameraSpec, GridChoice, Measure, MeshFormat, NodeSpec, RenderNode, RenderObject,
+    Backend, CameraSpec, GridChoice, HeightGrid, HeightmapFormat, Measure, MeshFormat, NodeSpec,
+    RenderNode, RenderObject,
 };
 use imprint_core::bvh::Bvh;
-use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, Mesh};
+use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, HeightField, Mesh};
 use imprint_gpu::GpuContext;
+use imprint_gpu::raster::GpuRasterizer;
 use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, render_cpu};
+use imprint_render::gpu_frame::GpuRenderer;
+use imprint_render::sequence::{ContactSheet, GifWriter};
 use imprint_render::slice::SliceOptions;
+use imprint_stages::depth::{HeightRegion, HeightView};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
 use imprint_stages::voxel::cpu::Voxelizer;
@@ -41,6 +46,7 @@ enum Value {
     Mesh(Arc<Mesh>),
     Boundary(BoundaryValue),
     Field(FieldValue),
+    Heights(Arc<HeightField>),
 }
 
 #[derive(Clone)]
@@ -87,9 +93,28 @@ enum Stage {
         format: MeshFormat,
         every: u32,
     },
+    Heightmap {
+        input: String,
+        region: HeightRegion,
+        view: HeightView,
+        /// The GPU rasteriser when the node runs on the GPU.
+        gpu: Option<Box<GpuRasterizer>>,
+    },
+    WriteHeightmap {
+        input: String,
+        dir: PathBuf,
+        formats: Vec<HeightmapFormat>,
+        every: u32,
+    },
     Render {
         node: Box<RenderNode>,
         out: PathBuf,
+        /// Frames rendered so far (the contact sheet and GIF count these).
+        rendered: u32,
+        sheet: Option<ContactSheet>,
+        gif: Option<GifWriter>,
+        /// The GPU renderer when the node runs on the GPU.
+        gpu: Option<Box<GpuRenderer>>,
     },
 }
 
@@ -119,10 +144,12 @@ pub fn run(
     };
     for name in &plan.order {
         let node = &plan.file.nodes[name];
-        let on_gpu = matches!(
-            stages[name],
-            Stage::Voxelize { gpu: true, .. } | Stage::Field { gpu: true, .. }
-        );
+        let on_gpu = match &stages[name] {
+            Stage::Voxelize { gpu, .. } | Stage::Field { gpu, .. } => *gpu,
+            Stage::Heightmap { gpu, .. } => gpu.is_some(),
+            Stage::Render { gpu, .. } => gpu.is_some(),
+            _ => false,
+        };
         report.nodes.insert(
             name.clone(),
             NodeReport {
@@ -240,7 +267,40 @@ pub fn run(
                         false
                     }
                 }
-                Stage::WriteField { .. } | Stage::WriteMesh { .. } | Stage::Render { .. } => false,
+                Stage::Heightmap {
+                    input,
+                    region,
+                    view,
+                    gpu: raster,
+                } => {
+                    if first_run || changed[input.as_str()] {
+                        let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
+                            unreachable!("edges are typed")
+                        };
+                        let hf = match raster {
+                            Some(r) => imprint_stages::depth::height_field_with(
+                                mesh,
+                                region,
+                                *view,
+                                |m, cam, w, h, o| {
+                                    r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
+                                },
+                            )?,
+                            None => imprint_stages::depth::height_field_cpu(mesh, region, *view)?,
+                        };
+                        let (lo, hi) = hf.height_range();
+                        nr.metrics.insert("height_min".into(), lo.into());
+                        nr.metrics.insert("height_max".into(), hi.into());
+                        values.insert(name.clone(), Value::Heights(Arc::new(hf)));
+                        true
+                    } else {
+                        false
+                    }
+                }
+                Stage::WriteField { .. }
+                | Stage::WriteMesh { .. }
+                | Stage::WriteHeightmap { .. }
+                | Stage::Render { .. } => false,
             };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             if did_run {
@@ -368,7 +428,50 @@ pub fn run(
                         .unwrap_or(0);
                     nr.metrics.insert("files".into(), (files + 1).into());
                 }
-                Stage::Render { node, out } if (done as u32).is_multiple_of(node.every) => {
+                Stage::WriteHeightmap {
+                    input,
+                    dir,
+                    formats,
+                    every,
+                } if (done as u32).is_multiple_of(*every) => {
+                    let t = Instant::now();
+                    let Some(Value::Heights(hf)) = values.get(input.as_str()) else {
+                        unreachable!("edges are typed")
+                    };
+                    use imprint_render::heightmap as hm;
+                    for f in formats.iter() {
+                        let stem = format!("{input}_{frame:04}");
+                        match f {
+                            HeightmapFormat::Png16 => {
+                                hm::write_heightmap_png16(&dir.join(format!("{stem}.png")), hf)?;
+                                report.files_written += 1; // and its JSON sidecar
+                            }
+                            HeightmapFormat::Exr => {
+                                hm::write_heightmap_exr(&dir.join(format!("{stem}.exr")), hf)?
+                            }
+                            HeightmapFormat::Npy => {
+                                hm::write_heightmap_npy(&dir.join(format!("{stem}.npy")), hf)?
+                            }
+                            HeightmapFormat::Preview => hm::write_heightmap_preview(
+                                &dir.join(format!("{stem}_preview.png")),
+                                hf,
+                            )?,
+                        }
+                    }
+                    report.files_written += formats.len();
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.metrics
+                        .insert("dir".into(), dir.display().to_string().into());
+                }
+                Stage::Render {
+                    node,
+                    out,
+                    rendered,
+                    sheet,
+                    gif,
+                    gpu: renderer,
+                } if (done as u32).is_multiple_of(node.every) => {
                     let t = Instant::now();
                     let mut scene = Scene {
                         ground_grid: node.ground_grid.then(GroundGrid::default),
@@ -396,12 +499,38 @@ pub fn run(
                                 index: *index,
                                 colormap: Default::default(),
                             },
+                            RenderObject::HeightField {
+                                heights,
+                                color,
+                                wireframe,
+                            } => {
+                                let Some(Value::Heights(hf)) = values.get(heights.as_str()) else {
+                                    unreachable!("edges are typed")
+                                };
+                                Object::mesh(hf.to_mesh(), [color.0, color.1, color.2])
+                                    .with_wireframe(*wireframe)
+                            }
                         });
                     }
-                    let img = render_cpu(&scene, &render_options(node, time)?)?;
+                    let ro = render_options(node, time)?;
+                    let img = match renderer {
+                        Some(r) => r.render(gpu.expect("GPU chosen at build"), &scene, &ro)?,
+                        None => render_cpu(&scene, &ro)?,
+                    };
                     let path = out.join(frame_path(&node.out, frame));
                     imprint_render::png::write_png(&path, &img)?;
                     report.files_written += 1;
+                    if let (Some(s), Some(spec)) = (sheet.as_mut(), &node.contact_sheet)
+                        && rendered.is_multiple_of(spec.every)
+                    {
+                        s.push(frame, &img);
+                    }
+                    if let (Some(g), Some(spec)) = (gif.as_mut(), &node.gif)
+                        && rendered.is_multiple_of(spec.every)
+                    {
+                        g.push(&img)?;
+                    }
+                    *rendered += 1;
                     let nr = report.nodes.get_mut(name).expect("report");
                     nr.record(t.elapsed().as_secs_f64() * 1e3);
                     nr.metrics
@@ -412,6 +541,36 @@ pub fn run(
         }
         report.frames.push(frame);
         progress(done as u32 + 1, total);
+    }
+    // Whole-run writers: only now, after every frame succeeded.
+    for (name, stage) in stages {
+        if let Stage::Render {
+            node,
+            out,
+            sheet,
+            gif,
+            ..
+        } = stage
+        {
+            // A node that rendered nothing in this frame range writes no sheet or GIF either.
+            if let (Some(s), Some(spec)) = (sheet, &node.contact_sheet)
+                && !s.is_empty()
+            {
+                s.write(&out.join(&spec.path))?;
+                report.files_written += 1;
+            }
+            if let (Some(g), Some(spec)) = (gif, &node.gif)
+                && g.frames() > 0
+            {
+                g.finish()?;
+                report.files_written += 1;
+                let nr = report.nodes.get_mut(&name).expect("report");
+                nr.metrics.insert(
+                    "gif".into(),
+                    out.join(&spec.path).display().to_string().into(),
+                );
+            }
+        }
     }
     report.wall_ms = start.elapsed().as_secs_f64() * 1e3;
     let json = serde_json::to_string_pretty(&report).expect("report is plain data");
@@ -587,9 +746,70 @@ fn build_stages(
                 }
             }
             NodeSpec::Render(r) => Stage::Render {
+                gpu: if choose_gpu(want, name, gpu)? {
+                    Some(Box::new(GpuRenderer::new(gpu.expect("chosen"))?))
+                } else {
+                    None
+                },
                 node: Box::new(r.clone()),
                 out: opts.out.clone(),
+                rendered: 0,
+                sheet: match &r.contact_sheet {
+                    Some(c) => Some(ContactSheet::new(c.columns, c.width)?),
+                    None => None,
+                },
+                gif: match &r.gif {
+                    // Real-time playback: each GIF frame stands for `every * g.every` frames.
+                    Some(g) => Some(GifWriter::create(
+                        &opts.out.join(&g.path),
+                        g.width,
+                        (r.every * g.every) as f32 / plan.file.fps,
+                    )?),
+                    None => None,
+                },
             },
+            NodeSpec::Heightmap(h) => {
+                let region = match h.grid {
+                    HeightGrid::Fit {
+                        resolution,
+                        padding,
+                    } => {
+                        let bounds = rest_bounds.get(&h.mesh).ok_or_else(|| {
+                            Error::Invalid(format!(
+                                "node '{name}': Fit needs the swept box of a Mesh node; give an Explicit grid"
+                            ))
+                        })?;
+                        HeightRegion::fit(bounds, resolution, padding, h.empty)?
+                    }
+                    HeightGrid::Explicit { origin, cell, dims } => HeightRegion::new(
+                        glam::Vec2::new(origin.0, origin.1),
+                        cell,
+                        glam::UVec2::new(dims.0, dims.1),
+                        h.empty,
+                    )?,
+                };
+                Stage::Heightmap {
+                    input: h.mesh.clone(),
+                    region,
+                    view: h.view,
+                    gpu: if choose_gpu(want, name, gpu)? {
+                        Some(Box::new(GpuRasterizer::new(gpu.expect("chosen"))?))
+                    } else {
+                        None
+                    },
+                }
+            }
+            NodeSpec::WriteHeightmap(w) => {
+                let mut formats = w.formats.clone();
+                formats.sort();
+                formats.dedup();
+                Stage::WriteHeightmap {
+                    input: w.heights.clone(),
+                    dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),
+                    formats,
+                    every: w.every,
+                }
+            }
             NodeSpec::WriteMesh(w) => Stage::WriteMesh {
                 input: w.mesh.clone(),
                 dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),

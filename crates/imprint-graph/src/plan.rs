@@ -2,7 +2,7 @@
 
 use crate::diagnostics::{Source, ron_error};
 use crate::overrides::apply_override;
-use crate::schema::{GridChoice, NodeSpec, PipelineFile, PortType};
+use crate::schema::{GridChoice, HeightGrid, NodeSpec, PipelineFile, PortType};
 use crate::{Error, Result};
 use petgraph::algo::{kosaraju_scc, toposort};
 use petgraph::graph::{DiGraph, NodeIndex};
@@ -284,6 +284,67 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 ));
             }
             crate::exec::render_options(r, 0.0).map_err(|e| fail("camera", e.to_string()))?;
+            if let Some(c) = &r.contact_sheet {
+                if c.every == 0 {
+                    return Err(fail("contact_sheet", "every must be at least 1".into()));
+                }
+                imprint_render::sequence::ContactSheet::new(c.columns, c.width)
+                    .map_err(|e| fail("contact_sheet", e.to_string()))?;
+            }
+            if let Some(g) = &r.gif {
+                if g.every == 0 {
+                    return Err(fail("gif", "every must be at least 1".into()));
+                }
+                // Only checks the values: nothing is created before the first frame.
+                imprint_render::sequence::GifWriter::create(Path::new(&g.path), g.width, 1.0)
+                    .map_err(|e| fail("gif", e.to_string()))?;
+            }
+        }
+        NodeSpec::Heightmap(h) => match h.grid {
+            HeightGrid::Fit {
+                resolution,
+                padding,
+            } => {
+                let max = imprint_core::raster::MAX_SIZE;
+                if resolution == 0 || resolution > max {
+                    return Err(fail(
+                        "grid",
+                        format!("resolution must be in 1..={max}, got {resolution}"),
+                    ));
+                }
+                if !(padding.is_finite() && padding >= 0.0) {
+                    return Err(fail(
+                        "grid",
+                        format!("grid padding must be finite and >= 0, got {padding}"),
+                    ));
+                }
+                if !h.empty.is_finite() {
+                    return Err(fail(
+                        "empty",
+                        format!("empty must be finite, got {}", h.empty),
+                    ));
+                }
+            }
+            HeightGrid::Explicit { origin, cell, dims } => {
+                imprint_stages::depth::HeightRegion::new(
+                    glam::Vec2::new(origin.0, origin.1),
+                    cell,
+                    glam::UVec2::new(dims.0, dims.1),
+                    h.empty,
+                )
+                .map_err(|e| fail("grid", e.to_string()))?;
+            }
+        },
+        NodeSpec::WriteHeightmap(w) => {
+            if w.every == 0 {
+                return Err(fail("every", "every must be at least 1".into()));
+            }
+            if w.formats.is_empty() {
+                return Err(fail(
+                    "formats",
+                    "list at least one of Png16, Exr, Npy, Preview".into(),
+                ));
+            }
         }
         NodeSpec::WriteField(crate::schema::WriteFieldNode { every, .. })
         | NodeSpec::WriteMesh(crate::schema::WriteMeshNode { every, .. }) => {

@@ -3,6 +3,7 @@
 
 use imprint_core::BoundaryVariant;
 use imprint_render::slice::SliceOptions;
+use imprint_stages::depth::HeightView;
 use imprint_stages::mesh::MeshParams;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -50,8 +51,83 @@ pub enum NodeSpec {
     WriteField(WriteFieldNode),
     /// Writes a mesh per frame as OBJ or PLY, for other tools (input: Mesh; a writer).
     WriteMesh(WriteMeshNode),
-    /// Renders meshes and field slices to a PNG per frame (inputs: Mesh, DistanceField; a writer).
+    /// The heights of a mesh seen straight down or up through a depth buffer, one pixel per
+    /// cell (input: Mesh; output: HeightField).
+    Heightmap(HeightmapNode),
+    /// Writes a height field per frame: 16-bit PNG + JSON sidecar, EXR, .npy, coloured
+    /// preview (input: HeightField; a writer).
+    WriteHeightmap(WriteHeightmapNode),
+    /// Renders meshes, height fields and field slices to a PNG per frame, with an optional
+    /// contact sheet and GIF of the run (inputs: Mesh, HeightField, DistanceField; a writer).
     Render(RenderNode),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeightmapNode {
+    /// The Mesh node to look at.
+    pub mesh: String,
+    /// `Above` (the top surface, default) or `Below` (the underside).
+    #[serde(default)]
+    pub view: HeightView,
+    pub grid: HeightGrid,
+    /// Height of cells the mesh does not cover.
+    #[serde(default)]
+    pub empty: f32,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+}
+
+/// The x-z cells of a Heightmap node.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum HeightGrid {
+    /// Square cells, `resolution` along the longer x/z side of the box the mesh sweeps over
+    /// the run, grown by `padding` (a fraction of that side) on every side.
+    Fit {
+        resolution: u32,
+        #[serde(default = "default_padding")]
+        padding: f32,
+    },
+    /// `origin` is the (x, z) centre of cell (0, 0).
+    Explicit {
+        origin: (f32, f32),
+        cell: f32,
+        dims: (u32, u32),
+    },
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WriteHeightmapNode {
+    /// The HeightField node to write.
+    pub heights: String,
+    /// Folder under the run's output folder (default: the node's name).
+    #[serde(default)]
+    pub dir: Option<String>,
+    /// Files per frame, each `<heights>_<frame:04>.<ext>` (the preview `_preview.png`).
+    #[serde(default = "default_heightmap_formats")]
+    pub formats: Vec<HeightmapFormat>,
+    /// Write every k-th frame (1 = every frame).
+    #[serde(default = "one")]
+    pub every: u32,
+}
+
+/// File formats of `WriteHeightmap`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]
+pub enum HeightmapFormat {
+    /// 16-bit grayscale PNG, heights mapped to the full range; the range is in a JSON
+    /// sidecar so the file reads back to within one quantisation step.
+    Png16,
+    /// Single-channel 32-bit float OpenEXR (channel "Y"): exact heights.
+    Exr,
+    /// NumPy `.npy`, f32, shape (nz, nx): exact heights.
+    Npy,
+    /// 8-bit colour-mapped picture with a legend, for people.
+    Preview,
+}
+
+fn default_heightmap_formats() -> Vec<HeightmapFormat> {
+    vec![HeightmapFormat::Png16, HeightmapFormat::Preview]
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -183,6 +259,62 @@ pub struct RenderNode {
     /// Render every k-th frame (1 = every frame).
     #[serde(default = "one")]
     pub every: u32,
+    /// A grid of every k-th rendered frame in one PNG.
+    #[serde(default)]
+    pub contact_sheet: Option<ContactSheetSpec>,
+    /// An animated GIF of the rendered frames, playing at the run's speed.
+    #[serde(default)]
+    pub gif: Option<GifSpec>,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+}
+
+/// Where and how a Render node writes its contact sheet.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSheetSpec {
+    /// Path under the run's output folder.
+    #[serde(default = "default_sheet_path")]
+    pub path: String,
+    /// Take every k-th rendered frame.
+    #[serde(default = "four")]
+    pub every: u32,
+    #[serde(default = "four")]
+    pub columns: u32,
+    /// Thumbnail width in pixels.
+    #[serde(default = "default_thumb_width")]
+    pub width: u32,
+}
+
+/// Where and how a Render node writes its GIF preview.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GifSpec {
+    /// Path under the run's output folder.
+    #[serde(default = "default_gif_path")]
+    pub path: String,
+    /// Take every k-th rendered frame.
+    #[serde(default = "one")]
+    pub every: u32,
+    /// Frame width in pixels (frames are scaled down, never up).
+    #[serde(default = "default_gif_width")]
+    pub width: u32,
+}
+
+fn four() -> u32 {
+    4
+}
+fn default_sheet_path() -> String {
+    "contact_sheet.png".into()
+}
+fn default_thumb_width() -> u32 {
+    320
+}
+fn default_gif_path() -> String {
+    "preview.gif".into()
+}
+fn default_gif_width() -> u32 {
+    480
 }
 
 fn default_width() -> u32 {
@@ -217,6 +349,18 @@ pub enum RenderObject {
         #[serde(default)]
         index: imprint_render::slice::SliceIndex,
     },
+    /// A HeightField node's surface through its cell centres, lit like a mesh.
+    HeightField {
+        heights: String,
+        #[serde(default = "default_ground_color")]
+        color: (f32, f32, f32),
+        #[serde(default)]
+        wireframe: bool,
+    },
+}
+
+fn default_ground_color() -> (f32, f32, f32) {
+    (0.55, 0.6, 0.5)
 }
 
 fn default_color() -> (f32, f32, f32) {
@@ -271,6 +415,7 @@ pub enum PortType {
     Mesh,
     Boundary,
     DistanceField,
+    HeightField,
 }
 
 impl std::fmt::Display for PortType {
@@ -279,6 +424,7 @@ impl std::fmt::Display for PortType {
             PortType::Mesh => "Mesh",
             PortType::Boundary => "Boundary",
             PortType::DistanceField => "DistanceField",
+            PortType::HeightField => "HeightField",
         })
     }
 }
@@ -291,6 +437,8 @@ impl NodeSpec {
             NodeSpec::DistanceField(_) => "DistanceField",
             NodeSpec::WriteField(_) => "WriteField",
             NodeSpec::WriteMesh(_) => "WriteMesh",
+            NodeSpec::Heightmap(_) => "Heightmap",
+            NodeSpec::WriteHeightmap(_) => "WriteHeightmap",
             NodeSpec::Render(_) => "Render",
         }
     }
@@ -303,6 +451,8 @@ impl NodeSpec {
             NodeSpec::DistanceField(f) => vec![("boundary", &f.boundary, PortType::Boundary)],
             NodeSpec::WriteField(w) => vec![("field", &w.field, PortType::DistanceField)],
             NodeSpec::WriteMesh(w) => vec![("mesh", &w.mesh, PortType::Mesh)],
+            NodeSpec::Heightmap(h) => vec![("mesh", &h.mesh, PortType::Mesh)],
+            NodeSpec::WriteHeightmap(w) => vec![("heights", &w.heights, PortType::HeightField)],
             NodeSpec::Render(r) => r
                 .objects
                 .iter()
@@ -310,6 +460,9 @@ impl NodeSpec {
                     RenderObject::Mesh { mesh, .. } => ("objects", mesh.as_str(), PortType::Mesh),
                     RenderObject::FieldSlice { field, .. } => {
                         ("objects", field.as_str(), PortType::DistanceField)
+                    }
+                    RenderObject::HeightField { heights, .. } => {
+                        ("objects", heights.as_str(), PortType::HeightField)
                     }
                 })
                 .collect(),
@@ -322,7 +475,11 @@ impl NodeSpec {
             NodeSpec::Mesh(_) => Some(PortType::Mesh),
             NodeSpec::Voxelize(_) => Some(PortType::Boundary),
             NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
-            NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) | NodeSpec::Render(_) => None,
+            NodeSpec::Heightmap(_) => Some(PortType::HeightField),
+            NodeSpec::WriteField(_)
+            | NodeSpec::WriteMesh(_)
+            | NodeSpec::WriteHeightmap(_)
+            | NodeSpec::Render(_) => None,
         }
     }
 
@@ -332,7 +489,13 @@ impl NodeSpec {
 
     /// Whether the node has a GPU path (the others always run on the CPU).
     pub fn has_gpu_path(&self) -> bool {
-        matches!(self, NodeSpec::Voxelize(_) | NodeSpec::DistanceField(_))
+        matches!(
+            self,
+            NodeSpec::Voxelize(_)
+                | NodeSpec::DistanceField(_)
+                | NodeSpec::Heightmap(_)
+                | NodeSpec::Render(_)
+        )
     }
 
     /// The per-node backend override, for nodes that have two paths.
@@ -340,6 +503,8 @@ impl NodeSpec {
         match self {
             NodeSpec::Voxelize(v) => v.backend,
             NodeSpec::DistanceField(f) => f.backend,
+            NodeSpec::Heightmap(h) => h.backend,
+            NodeSpec::Render(r) => r.backend,
             _ => None,
         }
     }

@@ -109,7 +109,7 @@ enum Shader {
 }
 
 /// The world quad of a field slice (two triangles, normal along the axis).
-fn slice_quad(field: &DistanceField, axis: Axis, index: u32) -> Mesh {
+pub(crate) fn slice_quad(field: &DistanceField, axis: Axis, index: u32) -> Mesh {
     let spec = &field.spec;
     let (u, v) = axis.plane_axes();
     let (du, dv) = (u.dim(), v.dim());
@@ -251,20 +251,71 @@ pub fn linear_to_srgb(l: f32) -> u8 {
 }
 
 /// Colour of wireframe lines (linear).
-const WIRE_COLOR: Vec3 = Vec3::new(0.015, 0.015, 0.02);
+pub(crate) const WIRE_COLOR: Vec3 = Vec3::new(0.015, 0.015, 0.02);
 /// Relative depth bias of the line depth test.
-const LINE_BIAS_REL: f32 = 2.0e-3;
+pub(crate) const LINE_BIAS_REL: f32 = 2.0e-3;
 
-/// Renders `scene` on the CPU. See the module doc for the pipeline.
-pub fn render_cpu(scene: &Scene, opts: &RenderOptions) -> Result<RgbImage> {
-    opts.validate()?;
-    let d = scene.lights.sun_direction;
+/// An sRGB colour → linear.
+pub(crate) fn srgb3_to_linear(c: [u8; 3]) -> Vec3 {
+    Vec3::new(
+        srgb_to_linear(c[0]),
+        srgb_to_linear(c[1]),
+        srgb_to_linear(c[2]),
+    )
+}
+
+/// The unit direction towards the sun; errors on a zero or non-finite direction.
+pub(crate) fn sun_direction(lights: &Lights) -> Result<Vec3> {
+    let d = lights.sun_direction;
     if !(d.is_finite() && d.length_squared() > 0.0) {
         return Err(Error::Invalid(format!(
             "render: lights.sun_direction must be finite and non-zero, got {d}"
         )));
     }
-    let light = d.normalize();
+    Ok(d.normalize())
+}
+
+/// The mesh's per-vertex normals, computed when it has none.
+pub(crate) fn vertex_normals(mesh: &Mesh) -> std::borrow::Cow<'_, [Vec3]> {
+    if mesh.normals.len() == mesh.positions.len() {
+        std::borrow::Cow::Borrowed(&mesh.normals)
+    } else {
+        let mut m = mesh.clone();
+        m.compute_normals();
+        std::borrow::Cow::Owned(m.normals)
+    }
+}
+
+/// The ground grid's linear colour and its segments, in drawing order; errors on a spacing
+/// that is not finite and positive, or too many lines.
+pub(crate) fn grid_segments(g: &GroundGrid) -> Result<(Vec3, Vec<[Vec3; 2]>)> {
+    if !(g.spacing.is_finite() && g.spacing > 0.0 && g.half_extent.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "render: ground_grid.spacing must be finite and > 0 (got {}), half_extent finite (got {})",
+            g.spacing, g.half_extent
+        )));
+    }
+    let e = g.half_extent.abs();
+    let k = (e / g.spacing).floor() as i64;
+    if k > 100_000 {
+        return Err(Error::Invalid(format!(
+            "render: ground_grid has {} lines per axis; raise spacing",
+            2 * k + 1
+        )));
+    }
+    let mut segments = Vec::with_capacity(2 * (2 * k as usize + 1));
+    for m in -k..=k {
+        let u = m as f32 * g.spacing;
+        segments.push([Vec3::new(u, 0.0, -e), Vec3::new(u, 0.0, e)]);
+        segments.push([Vec3::new(-e, 0.0, u), Vec3::new(e, 0.0, u)]);
+    }
+    Ok((srgb3_to_linear(g.color), segments))
+}
+
+/// Renders `scene` on the CPU. See the module doc for the pipeline.
+pub fn render_cpu(scene: &Scene, opts: &RenderOptions) -> Result<RgbImage> {
+    opts.validate()?;
+    let light = sun_direction(&scene.lights)?;
     let s = opts.samples;
     let (sw, sh) = (opts.width * s, opts.height * s);
     let cam = &opts.camera;
@@ -303,13 +354,7 @@ pub fn render_cpu(scene: &Scene, opts: &RenderOptions) -> Result<RgbImage> {
         };
         let base = merged.positions.len() as u32;
         merged.positions.extend_from_slice(&mesh.positions);
-        if mesh.normals.len() == mesh.positions.len() {
-            merged.normals.extend_from_slice(&mesh.normals);
-        } else {
-            let mut m = mesh.clone();
-            m.compute_normals();
-            merged.normals.extend_from_slice(&m.normals);
-        }
+        merged.normals.extend_from_slice(&vertex_normals(mesh));
         merged
             .triangles
             .extend(mesh.triangles.iter().map(|t| t.map(|v| v + base)));
@@ -327,11 +372,7 @@ pub fn render_cpu(scene: &Scene, opts: &RenderOptions) -> Result<RgbImage> {
     };
 
     // 3. Shade.
-    let bg = Vec3::new(
-        srgb_to_linear(scene.background[0]),
-        srgb_to_linear(scene.background[1]),
-        srgb_to_linear(scene.background[2]),
-    );
+    let bg = srgb3_to_linear(scene.background);
     let frame = cam.frame();
     let persp = cam.is_perspective();
     let lights = scene.lights;
@@ -398,29 +439,9 @@ pub fn render_cpu(scene: &Scene, opts: &RenderOptions) -> Result<RgbImage> {
         width: s as i32, // line width in samples ≈ one output pixel
     };
     if let Some(g) = &scene.ground_grid {
-        if !(g.spacing.is_finite() && g.spacing > 0.0 && g.half_extent.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "render: ground_grid.spacing must be finite and > 0 (got {}), half_extent finite (got {})",
-                g.spacing, g.half_extent
-            )));
-        }
-        let color = Vec3::new(
-            srgb_to_linear(g.color[0]),
-            srgb_to_linear(g.color[1]),
-            srgb_to_linear(g.color[2]),
-        );
-        let e = g.half_extent.abs();
-        let k = (e / g.spacing).floor() as i64;
-        if k > 100_000 {
-            return Err(Error::Invalid(format!(
-                "render: ground_grid has {} lines per axis; raise spacing",
-                2 * k + 1
-            )));
-        }
-        for m in -k..=k {
-            let u = m as f32 * g.spacing;
-            lines.segment(Vec3::new(u, 0.0, -e), Vec3::new(u, 0.0, e), color);
-            lines.segment(Vec3::new(-e, 0.0, u), Vec3::new(e, 0.0, u), color);
+        let (color, segments) = grid_segments(g)?;
+        for [a, b] in segments {
+            lines.segment(a, b, color);
         }
     }
     for obj in &scene.objects {
@@ -480,17 +501,19 @@ fn slice_color(field: &DistanceField, axis: Axis, index: u32, colormap: Colormap
         cell[d] = (c[d].max(0.0) as u32).min(n - 1);
     }
     cell[axis.dim()] = index;
+    cell_color(field, cell, colormap)
+}
+
+/// The linear colour of one cell of a drawn field slice: its distance in cells through
+/// `colormap` (0 at the surface, `band` at the band's edge), far cells grey.
+pub(crate) fn cell_color(field: &DistanceField, cell: UVec3, colormap: Colormap) -> Vec3 {
     let i = field.spec.index(cell);
     let rgb = if field.is_far(i) {
         FAR_GREY.0
     } else {
         colormap.sample(field.dist[i] / field.spec.cell / field.band)
     };
-    Vec3::new(
-        srgb_to_linear(rgb[0]),
-        srgb_to_linear(rgb[1]),
-        srgb_to_linear(rgb[2]),
-    )
+    srgb3_to_linear(rgb)
 }
 
 /// Depth-tested line drawing into the linear sample buffer.

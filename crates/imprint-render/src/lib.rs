@@ -7,7 +7,10 @@
 //! - [`slice`]: a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
 //! - [`frame`]: the CPU frame renderer (meshes, field slices, sun + ambient, ground grid,
 //!   wireframe, supersampling);
-//! - [`png`]: PNG output.
+//! - [`gpu_frame`]: the same frames on the GPU ([`gpu_frame::GpuRenderer`]), checked against
+//!   the CPU renderer;
+//! - [`png`]: PNG output;
+//! - [`sequence`]: a contact sheet and an animated GIF of a run.
 //!
 //! Every file is written through `imprint_core::io::atomic_write`: a reader never finds a
 //! half-written file under its final name.
@@ -16,10 +19,12 @@ pub mod colormap;
 pub mod field_io;
 pub mod font;
 pub mod frame;
+pub mod gpu_frame;
 pub mod heightmap;
 pub mod mesh_io;
 pub mod npy;
 pub mod png;
+pub mod sequence;
 pub mod slice;
 
 pub use colormap::Colormap;

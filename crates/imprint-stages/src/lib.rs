@@ -2,6 +2,7 @@
 //! reference), a GPU path (wgpu compute, tested against the CPU), and its error metrics.
 //! Stages know nothing of RON files or scheduling: the graph crate calls them.
 
+pub mod depth;
 pub mod mesh;
 pub mod metrics;
 pub mod sdf;
