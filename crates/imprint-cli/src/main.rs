@@ -75,6 +75,34 @@ enum Command {
         #[arg(long, default_value = "out")]
         out: PathBuf,
     },
+    /// Stability map of a pipeline's Cloth node: stiffness multipliers × substep over the
+    /// estimated critical step; each cell runs the cloth (perturbed, no colliders) and says
+    /// whether it stayed stable or blew up.
+    Stress {
+        /// What to stress.
+        #[arg(value_enum)]
+        what: StressWhat,
+        file: PathBuf,
+        /// The Cloth node (default: the pipeline's only one).
+        #[arg(long)]
+        node: Option<String>,
+        /// Stiffness multipliers (rows).
+        #[arg(long, value_delimiter = ',', default_values_t = [1.0, 10.0, 100.0, 1000.0])]
+        scales: Vec<f32>,
+        /// Substep / estimated critical substep (columns).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.5, 0.75, 0.9, 1.1, 1.25, 1.5, 2.0])]
+        ratios: Vec<f32>,
+        /// Frames each cell runs.
+        #[arg(long, default_value_t = 12)]
+        frames: u32,
+        #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
+        sets: Vec<String>,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum StressWhat {
+    Cloth,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -168,6 +196,22 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             print!("{}", plan.dot());
             Ok(())
         }
+        Command::Stress {
+            what: StressWhat::Cloth,
+            file,
+            node,
+            scales,
+            ratios,
+            frames,
+            sets,
+        } => {
+            let plan = imprint_graph::load(&file, &sets)?;
+            print!(
+                "{}",
+                stress_cloth(&plan, node.as_deref(), &scales, &ratios, frames)?
+            );
+            Ok(())
+        }
         Command::Field {
             mesh,
             resolution,
@@ -188,6 +232,85 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             run_plan(&plan, out, None, backend.map(Into::into))
         }
     }
+}
+
+/// The table of `imprint stress cloth`.
+fn stress_cloth(
+    plan: &Plan,
+    node: Option<&str>,
+    scales: &[f32],
+    ratios: &[f32],
+    frames: u32,
+) -> imprint_graph::Result<String> {
+    use imprint_graph::schema::NodeSpec;
+    use imprint_stages::cloth::{ClothAssets, stress_map};
+    let cloths: Vec<(&String, &imprint_graph::schema::ClothNode)> = plan
+        .file
+        .nodes
+        .iter()
+        .filter_map(|(n, s)| match s {
+            NodeSpec::Cloth(c) => Some((n, c)),
+            _ => None,
+        })
+        .collect();
+    let (name, cloth) = match (node, cloths.as_slice()) {
+        (Some(want), _) => cloths
+            .iter()
+            .find(|(n, _)| n.as_str() == want)
+            .copied()
+            .ok_or_else(|| {
+                imprint_core::Error::Invalid(format!("--node {want}: no Cloth node of that name"))
+            })?,
+        (None, [one]) => *one,
+        (None, _) => {
+            return Err(imprint_core::Error::Invalid(format!(
+                "{} Cloth nodes in the pipeline; name one with --node",
+                cloths.len()
+            ))
+            .into());
+        }
+    };
+    if frames == 0 {
+        return Err(imprint_core::Error::Invalid("--frames must be at least 1".into()).into());
+    }
+    let assets = ClothAssets::load(&cloth.params, &plan.base_dir)?;
+    let cases = stress_map(&cloth.params, &assets, scales, ratios, frames)?;
+    let mut s = format!(
+        "cloth '{name}': {} substeps per frame at {} fps, {frames} frames per cell, every \
+         particle nudged by 1% of the shortest rest length, no colliders\n\
+         cell: ok = stable (largest strain), BOOM@f = stopped at frame f; * = the estimate \
+         predicted the other outcome\n\n",
+        cloth.params.substeps, plan.file.fps
+    );
+    s += &format!("{:>10} |", "stiffness");
+    for r in ratios {
+        s += &format!(" {:>11}", format!("dt/dc {r}"));
+    }
+    s += "\n";
+    s += &format!("{}\n", "-".repeat(12 + 12 * ratios.len()));
+    let mut agree = 0;
+    for (row, scale) in cases.chunks(ratios.len()).zip(scales) {
+        s += &format!("{:>9}x |", scale);
+        for c in row {
+            let cell = match &c.outcome {
+                imprint_stages::cloth::StressOutcome::Stable { max_strain } => {
+                    format!("ok {max_strain:.2}")
+                }
+                imprint_stages::cloth::StressOutcome::Exploded { frame, .. } => {
+                    format!("BOOM@{frame}")
+                }
+            };
+            let right = c.predicted_stable == c.outcome.is_stable();
+            agree += right as usize;
+            s += &format!(" {:>11}", format!("{cell}{}", if right { "" } else { "*" }));
+        }
+        s += "\n";
+    }
+    s += &format!(
+        "\nthe stability estimate predicted {agree} of {} cells\n",
+        cases.len()
+    );
+    Ok(s)
 }
 
 fn run_plan(

@@ -553,3 +553,92 @@ fn heightmaps_contact_sheet_and_gif() {
     }
     assert_eq!(n, 2);
 }
+
+/// A cloth dropped on a static sphere's field: frames and OBJs come out, the report carries
+/// per-frame contact metrics, and no particle ends inside the body.
+#[test]
+fn cloth_node_runs_and_reports_per_frame_metrics() {
+    let nodes = r#"        "ball": Mesh(primitive: Sphere(radius: 0.3, segments: 48, rings: 24)),
+        "vox": Voxelize(mesh: "ball", grid: Fit(resolution: 48)),
+        "field": DistanceField(boundary: "vox", band: 3, measure: Never),
+        "cloth": Cloth(colliders: ["field"], params: (
+            shape: Grid(size: (0.8, 0.8), resolution: (12, 12), center: (0, 0.4, 0)),
+            material: Harada(k_structural: 20.0, k_shear: 5.0),
+            collision: (epsilon: 0.01, friction: 0.3, ground: -0.5),
+            substeps: 16)),
+        "obj": WriteMesh(mesh: "cloth"),"#;
+    let c = case(nodes);
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let d = c.dir.path().join("o");
+    let m = imprint_core::Mesh::load_obj(&d.join("obj/cloth_0001.obj")).unwrap();
+    assert_eq!(m.positions.len(), 144);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let frames = report["nodes"]["cloth"]["metrics"]["per_frame"]
+        .as_array()
+        .unwrap();
+    assert_eq!(frames.len(), 2);
+    for f in frames {
+        assert_eq!(f["inside"], 0);
+        assert!(f["max_strain"].as_f64().unwrap().is_finite());
+    }
+    // Frame 0 starts at rest and falls: kinetic energy grows.
+    assert!(frames[1]["kinetic"].as_f64() > frames[0]["kinetic"].as_f64());
+}
+
+/// An unstable cloth is warned about before running and stopped with exit code 1 and a
+/// message naming node, frame, substep and the substeps that would fix it; `stress cloth`
+/// prints the map with the estimate's predictions.
+#[test]
+fn unstable_cloth_is_warned_stopped_and_mapped() {
+    let nodes = r#"        "cloth": Cloth(params: (
+            shape: Grid(size: (0.5, 0.5), resolution: (8, 8), center: (0, 1, 0), normal: (0, 0, 1)),
+            material: Harada(k_structural: 10000000.0, k_shear: 10000000.0),
+            pins: [TopEdge], substeps: 1)),
+        "obj": WriteMesh(mesh: "cloth"),"#;
+    let c = case(nodes);
+    let out = imprint(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("warning: node 'cloth'"), "{err}");
+    assert!(
+        err.contains("node 'cloth', frame 1") && err.contains("substep 1 of 1"),
+        "{err}"
+    );
+    assert!(err.contains("substeps:"), "{err}");
+    // Frame 0 (at rest) was written; nothing for the frame that failed.
+    assert!(c.dir.path().join("o/obj/cloth_0000.obj").exists());
+    assert!(!c.dir.path().join("o/obj/cloth_0001.obj").exists());
+
+    let stable = nodes
+        .replace("10000000.0", "50.0")
+        .replace("substeps: 1", "substeps: 16");
+    let c = case(&stable);
+    let out = run_ok(
+        &[
+            "stress",
+            "cloth",
+            c.file.to_str().unwrap(),
+            "--scales",
+            "1,100",
+            "--ratios",
+            "0.5,2",
+            "--frames",
+            "4",
+        ],
+        c.dir.path(),
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = text.lines().filter(|l| l.contains("x |")).collect();
+    assert_eq!(rows.len(), 2, "{text}");
+    for r in rows {
+        assert!(r.contains("ok ") && r.contains("BOOM@"), "{r}");
+    }
+    assert!(text.contains("predicted"), "{text}");
+}

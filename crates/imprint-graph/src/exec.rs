@@ -19,6 +19,7 @@ use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, ren
 use imprint_render::gpu_frame::GpuRenderer;
 use imprint_render::sequence::{ContactSheet, GifWriter};
 use imprint_render::slice::SliceOptions;
+use imprint_stages::cloth::ClothSim;
 use imprint_stages::depth::{HeightRegion, HeightView};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
@@ -92,6 +93,12 @@ enum Stage {
         dir: PathBuf,
         format: MeshFormat,
         every: u32,
+    },
+    Cloth {
+        colliders: Vec<String>,
+        sim: Box<ClothSim>,
+        /// The colliders' fields at the end of the previous frame: the start of this one.
+        previous: Vec<Arc<DistanceField>>,
     },
     Heightmap {
         input: String,
@@ -266,6 +273,30 @@ pub fn run(
                     } else {
                         false
                     }
+                }
+                Stage::Cloth {
+                    colliders,
+                    sim,
+                    previous,
+                } => {
+                    let end = colliders
+                        .iter()
+                        .map(|c| cpu_field(c, &values, &mut cpu_fields, gpu))
+                        .collect::<crate::Result<Vec<_>>>()?;
+                    let end_refs: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
+                    let start_refs: Vec<&DistanceField> = previous.iter().map(|f| &**f).collect();
+                    let m = sim.step_frame(&start_refs, &end_refs, frame, 1.0 / plan.file.fps)?;
+                    *previous = end;
+                    let per_frame = nr
+                        .metrics
+                        .entry("per_frame".into())
+                        .or_insert_with(|| serde_json::Value::Array(Vec::new()));
+                    if let serde_json::Value::Array(a) = per_frame {
+                        a.push(serde_json::to_value(m).expect("plain data"));
+                    }
+                    nr.metrics.insert("particles".into(), sim.len().into());
+                    values.insert(name.clone(), Value::Mesh(Arc::new(sim.to_mesh())));
+                    true
                 }
                 Stage::Heightmap {
                     input,
@@ -706,7 +737,15 @@ fn build_stages(
                     GridChoice::Fit {
                         resolution,
                         padding,
-                    } => GridSpec::fit(&rest_bounds[&v.mesh], resolution, padding)?,
+                    } => {
+                        let bounds = rest_bounds.get(&v.mesh).ok_or_else(|| {
+                            Error::Invalid(format!(
+                                "node '{name}': Fit needs the swept box of a Mesh node, and '{}' is computed while running; give an Explicit grid",
+                                v.mesh
+                            ))
+                        })?;
+                        GridSpec::fit(bounds, resolution, padding)?
+                    }
                     GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
                         glam::Vec3::new(origin.0, origin.1, origin.2),
                         cell,
@@ -768,6 +807,22 @@ fn build_stages(
                     None => None,
                 },
             },
+            NodeSpec::Cloth(c) => {
+                let sim = ClothSim::new(&c.params, &plan.base_dir)
+                    .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?
+                    .with_name(name.clone());
+                if let Some(w) = sim
+                    .stability()
+                    .warning(c.params.substeps, 1.0 / plan.file.fps)
+                {
+                    eprintln!("warning: node '{name}': {w}");
+                }
+                Stage::Cloth {
+                    colliders: c.colliders.clone(),
+                    sim: Box::new(sim),
+                    previous: Vec::new(),
+                }
+            }
             NodeSpec::Heightmap(h) => {
                 let region = match h.grid {
                     HeightGrid::Fit {

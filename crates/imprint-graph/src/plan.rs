@@ -335,6 +335,11 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 .map_err(|e| fail("grid", e.to_string()))?;
             }
         },
+        NodeSpec::Cloth(c) => {
+            c.params
+                .validate()
+                .map_err(|e| fail("params", e.to_string()))?;
+        }
         NodeSpec::WriteHeightmap(w) => {
             if w.every == 0 {
                 return Err(fail("every", "every must be at least 1".into()));

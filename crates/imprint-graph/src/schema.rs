@@ -3,6 +3,7 @@
 
 use imprint_core::BoundaryVariant;
 use imprint_render::slice::SliceOptions;
+use imprint_stages::cloth::ClothParams;
 use imprint_stages::depth::HeightView;
 use imprint_stages::mesh::MeshParams;
 use serde::{Deserialize, Serialize};
@@ -51,6 +52,9 @@ pub enum NodeSpec {
     WriteField(WriteFieldNode),
     /// Writes a mesh per frame as OBJ or PLY, for other tools (input: Mesh; a writer).
     WriteMesh(WriteMeshNode),
+    /// A mass-spring cloth (Harada, or Tokoi's material) pushed by distance fields (inputs:
+    /// DistanceField colliders; output: Mesh, so every mesh consumer takes it).
+    Cloth(ClothNode),
     /// The heights of a mesh seen straight down or up through a depth buffer, one pixel per
     /// cell (input: Mesh; output: HeightField).
     Heightmap(HeightmapNode),
@@ -60,6 +64,16 @@ pub enum NodeSpec {
     /// Renders meshes, height fields and field slices to a PNG per frame, with an optional
     /// contact sheet and GIF of the run (inputs: Mesh, HeightField, DistanceField; a writer).
     Render(RenderNode),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClothNode {
+    /// DistanceField nodes the cloth collides with, applied in this order each substep.
+    #[serde(default)]
+    pub colliders: Vec<String>,
+    /// Shape, material, pins, contact, substeps: `imprint_stages::cloth::ClothParams`.
+    pub params: ClothParams,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -437,6 +451,7 @@ impl NodeSpec {
             NodeSpec::DistanceField(_) => "DistanceField",
             NodeSpec::WriteField(_) => "WriteField",
             NodeSpec::WriteMesh(_) => "WriteMesh",
+            NodeSpec::Cloth(_) => "Cloth",
             NodeSpec::Heightmap(_) => "Heightmap",
             NodeSpec::WriteHeightmap(_) => "WriteHeightmap",
             NodeSpec::Render(_) => "Render",
@@ -451,6 +466,11 @@ impl NodeSpec {
             NodeSpec::DistanceField(f) => vec![("boundary", &f.boundary, PortType::Boundary)],
             NodeSpec::WriteField(w) => vec![("field", &w.field, PortType::DistanceField)],
             NodeSpec::WriteMesh(w) => vec![("mesh", &w.mesh, PortType::Mesh)],
+            NodeSpec::Cloth(c) => c
+                .colliders
+                .iter()
+                .map(|f| ("colliders", f.as_str(), PortType::DistanceField))
+                .collect(),
             NodeSpec::Heightmap(h) => vec![("mesh", &h.mesh, PortType::Mesh)],
             NodeSpec::WriteHeightmap(w) => vec![("heights", &w.heights, PortType::HeightField)],
             NodeSpec::Render(r) => r
@@ -475,6 +495,7 @@ impl NodeSpec {
             NodeSpec::Mesh(_) => Some(PortType::Mesh),
             NodeSpec::Voxelize(_) => Some(PortType::Boundary),
             NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
+            NodeSpec::Cloth(_) => Some(PortType::Mesh),
             NodeSpec::Heightmap(_) => Some(PortType::HeightField),
             NodeSpec::WriteField(_)
             | NodeSpec::WriteMesh(_)

@@ -2,6 +2,8 @@
 //! reference), a GPU path (wgpu compute, tested against the CPU), and its error metrics.
 //! Stages know nothing of RON files or scheduling: the graph crate calls them.
 
+mod bare_option;
+pub mod cloth;
 pub mod depth;
 pub mod mesh;
 pub mod metrics;

@@ -16,13 +16,25 @@ pub const MAX_PRIMITIVE_TRIANGLES: u64 = 1 << 24;
 #[serde(deny_unknown_fields)]
 pub struct MeshParams {
     /// OBJ file, relative to the pipeline file's folder.
-    #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        with = "crate::bare_option",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub path: Option<String>,
     /// A procedural shape centred on the origin (instead of `path`).
-    #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        with = "crate::bare_option",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub primitive: Option<Primitive>,
     /// Uniform scale and translation of the rest mesh; `None` keeps its own coordinates.
-    #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        with = "crate::bare_option",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub fit: Option<Fit>,
     /// Deformations applied in order to the fitted rest mesh, as functions of time.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -196,7 +208,11 @@ pub enum Motion {
     Twist {
         axis: Axis,
         degrees: f32,
-        #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            with = "crate::bare_option",
+            skip_serializing_if = "Option::is_none"
+        )]
         period: Option<f32>,
     },
     /// Barr's (1984) circular-arc bend of the whole length along `axis` toward `toward`
@@ -206,9 +222,17 @@ pub enum Motion {
     Bend {
         axis: Axis,
         degrees: f32,
-        #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            with = "crate::bare_option",
+            skip_serializing_if = "Option::is_none"
+        )]
         toward: Option<Axis>,
-        #[serde(default, with = "bare_option", skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            with = "crate::bare_option",
+            skip_serializing_if = "Option::is_none"
+        )]
         period: Option<f32>,
     },
     /// Travelling wave: p[displace] += amplitude sin(2π (p[direction] - speed t) / wavelength),
@@ -482,25 +506,6 @@ fn at_least(field: &str, v: u32, min: u32) -> Result<()> {
         Ok(())
     } else {
         Err(Error::Invalid(format!("{field} must be >= {min}, got {v}")))
-    }
-}
-
-/// `Option<T>` written as a bare `T` (and left out when `None`), so files need no `Some(..)`
-/// whether or not the reader enables RON's `implicit_some`.
-mod bare_option {
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-    pub fn serialize<S: Serializer, T: Serialize>(v: &Option<T>, s: S) -> Result<S::Ok, S::Error> {
-        match v {
-            Some(v) => v.serialize(s),
-            None => s.serialize_none(),
-        }
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>, T: Deserialize<'de>>(
-        d: D,
-    ) -> Result<Option<T>, D::Error> {
-        T::deserialize(d).map(Some)
     }
 }
 

@@ -1,0 +1,1012 @@
+//! The CPU cloth simulator: H's mass-spring cloth (or Tokoi's material) integrated by damped
+//! position Verlet (H eq. 10) in substeps, pushed by the bodies' distance fields.
+//!
+//! Each substep computes every particle's next position from the current and previous
+//! positions only (a gather over its own springs, hinges and faces), in parallel chunks, and
+//! then rotates the three position buffers. Nothing a particle computes depends on which
+//! thread runs it or how the work is split, and every sum (energies, counts) is taken per
+//! fixed-size chunk and then over chunks in order, so a run gives the same bytes on 1 or
+//! 16 threads. The arrays are flat `Vec4`s and CSR lists, the layout the GPU path will bind.
+
+use super::contact::{self, Collider, Hit};
+use super::metrics::{ClothFrameMetrics, Energy};
+use super::params::{ClothParams, Material, Shape};
+use super::sampler::{CachedField, FieldCache};
+use super::shape::ClothShape;
+use super::springs::{
+    Faces, Hinges, LinkQuad, Links, SpringLaw, enumerate_springs, hinge_angle_gradient,
+    hinge_energy, hinge_slope, spring_constants,
+};
+use super::stability::{self, StabilityEstimate};
+use super::texture::AnisotropyMap;
+use glam::{Mat4, Vec3, Vec4};
+use imprint_core::{DistanceField, Error, Mesh, Result};
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Particles per parallel task (and per partial sum). Fixed, so sums do not depend on the
+/// number of threads.
+const CHUNK: usize = 256;
+
+/// Lengths below this count as zero when normalising a spring (coincident particles).
+const TINY: f32 = 1e-20;
+
+/// Positions of the current and previous substep; `w` is the inverse mass (0 = pinned).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClothState {
+    pub pos: Vec<Vec4>,
+    pub prev: Vec<Vec4>,
+}
+
+/// Files a cloth reads: the garment mesh and the anisotropy texture (load them with
+/// [`ClothAssets::load`], or build them in memory).
+#[derive(Clone, Debug, Default)]
+pub struct ClothAssets {
+    pub mesh: Option<Mesh>,
+    pub anisotropy: Option<AnisotropyMap>,
+}
+
+impl ClothAssets {
+    /// Reads what `params` names, paths relative to `base_dir`.
+    pub fn load(params: &ClothParams, base_dir: &Path) -> Result<Self> {
+        let mesh = match &params.shape {
+            Shape::Mesh { path } => Some(Mesh::load_obj(&base_dir.join(path))?),
+            Shape::Grid { .. } => None,
+        };
+        let anisotropy = match &params.material {
+            Material::Tokoi {
+                anisotropy: Some(a),
+                ..
+            } => Some(AnisotropyMap::load(&base_dir.join(&a.texture), a.scale)?),
+            _ => None,
+        };
+        Ok(ClothAssets { mesh, anisotropy })
+    }
+}
+
+/// Per-chunk results of one substep, reduced in chunk order.
+#[derive(Clone, Copy, Debug, Default)]
+struct SubstepStats {
+    kinetic: f64,
+    contacts: u32,
+    inside: u32,
+    max_depth: f32,
+    max_accel: f32,
+    band_misses: u32,
+    /// First particle with a non-finite position, or u32::MAX.
+    nonfinite: u32,
+    /// First particle with a spring beyond `limits.max_stretch`, or u32::MAX.
+    overstretched: u32,
+}
+
+impl SubstepStats {
+    fn new() -> Self {
+        SubstepStats {
+            nonfinite: u32::MAX,
+            overstretched: u32::MAX,
+            ..Default::default()
+        }
+    }
+
+    fn merge(&mut self, o: &SubstepStats) {
+        self.kinetic += o.kinetic;
+        self.contacts += o.contacts;
+        self.inside += o.inside;
+        self.max_depth = self.max_depth.max(o.max_depth);
+        self.max_accel = self.max_accel.max(o.max_accel);
+        self.band_misses += o.band_misses;
+        self.nonfinite = self.nonfinite.min(o.nonfinite);
+        self.overstretched = self.overstretched.min(o.overstretched);
+    }
+}
+
+/// What the pass after a frame sums (see `ClothSim::frame_pass`).
+#[derive(Clone, Copy, Debug, Default)]
+struct FramePass {
+    energy: Energy,
+    close: u32,
+    close_depth: f32,
+    strain: f32,
+}
+
+/// Everything a particle's update reads, for one substep.
+struct Substep<'a> {
+    links: &'a Links,
+    hinges: &'a Hinges,
+    faces: &'a Faces,
+    pin_slot: &'a [u32],
+    pin_from: &'a [Vec3],
+    pin_to: &'a [Vec3],
+    colliders: &'a [Collider<'a>],
+    /// Fraction of the frame at this substep's end (H §5.3's j/n).
+    s: f32,
+    dt: f32,
+    /// dt / (previous substep's dt): scales the Verlet velocity term when dt changes.
+    ratio: f32,
+    damping: f32,
+    gravity: Vec3,
+    wind: Option<(Vec3, f32)>,
+    eps: f32,
+    friction: f32,
+    ground: Option<f32>,
+    max_stretch: f32,
+}
+
+/// A cloth and its state between frames.
+pub struct ClothSim {
+    params: ClothParams,
+    node: String,
+    shape: ClothShape,
+    links: Links,
+    hinges: Hinges,
+    faces: Faces,
+    pinned: Vec<u32>,
+    /// Per particle: its index in `pinned`, or u32::MAX.
+    pin_slot: Vec<u32>,
+    pin_from: Vec<Vec3>,
+    pin_to: Vec<Vec3>,
+    state: ClothState,
+    next: Vec<Vec4>,
+    /// The state at the start of the frame being stepped, restored when it fails.
+    backup: ClothState,
+    backup_side: Vec<Vec4>,
+    /// Per particle and collider: outward direction at the last sample (see `contact`).
+    side: Vec<Vec4>,
+    side_fields: usize,
+    /// Per collider, the cached cells of its start and end fields (buffers kept).
+    caches: Vec<FieldCache>,
+    stats: Vec<SubstepStats>,
+    dt_prev: Option<f32>,
+    first_energy: Option<f64>,
+    stability: StabilityEstimate,
+    /// Diagonal of the rest shape's bounding box (for the energy scale).
+    extent: f32,
+}
+
+impl ClothSim {
+    /// Validates `params`, reads its files (relative to `base_dir`) and builds the cloth at rest.
+    pub fn new(params: &ClothParams, base_dir: &Path) -> Result<Self> {
+        params.validate()?;
+        Self::from_assets(params, &ClothAssets::load(params, base_dir)?)
+    }
+
+    /// Builds the cloth from assets already in memory.
+    pub fn from_assets(params: &ClothParams, assets: &ClothAssets) -> Result<Self> {
+        params.validate()?;
+        let shape = ClothShape::build(&params.shape, assets.mesh.as_ref())?;
+        let n = shape.len();
+        if let Material::Tokoi {
+            anisotropy: Some(_),
+            ..
+        } = &params.material
+        {
+            if assets.anisotropy.is_none() {
+                return Err(Error::Invalid(
+                    "cloth: material.anisotropy names a texture that was not loaded".into(),
+                ));
+            }
+            if shape.corner_uvs.is_none() {
+                return Err(Error::Invalid(
+                    "cloth: material.anisotropy needs UVs, and the garment mesh has none".into(),
+                ));
+            }
+        }
+        let with_bend = matches!(
+            params.material,
+            Material::Harada {
+                k_bend: Some(_),
+                ..
+            }
+        );
+        let springs = enumerate_springs(&shape, with_bend);
+        let (law, k) = spring_constants(
+            &springs,
+            &shape.rest,
+            &params.material,
+            params.stiffness_mode,
+            assets.anisotropy.as_ref(),
+        );
+        let links = Links::build(n, &springs, &k, law, &shape.rest);
+        let hinges = match params.material {
+            Material::Tokoi { bend_c, .. } if bend_c > 0.0 => {
+                Hinges::build(n, &shape.triangles, &shape.rest, bend_c)
+            }
+            _ => Hinges::build(n, &[], &[], 0.0),
+        };
+        let faces = Faces::build(n, &shape.triangles);
+        let pinned = shape.resolve_pins(&params.pins)?;
+        let mut pin_slot = vec![u32::MAX; n];
+        for (k, &p) in pinned.iter().enumerate() {
+            pin_slot[p as usize] = k as u32;
+        }
+        let inv_mass = 1.0 / params.mass;
+        let pos: Vec<Vec4> = shape
+            .rest
+            .iter()
+            .zip(&pin_slot)
+            .map(|(p, &slot)| p.extend(if slot == u32::MAX { inv_mass } else { 0.0 }))
+            .collect();
+        let targets: Vec<Vec3> = pinned.iter().map(|&p| shape.rest[p as usize]).collect();
+        let is_pinned: Vec<bool> = pin_slot.iter().map(|&s| s != u32::MAX).collect();
+        let stability = stability::estimate(
+            &links,
+            &hinges,
+            &shape.rest,
+            &is_pinned,
+            params.mass,
+            params.damping,
+        );
+        let (lo, hi) = shape.rest.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        Ok(ClothSim {
+            params: params.clone(),
+            node: "cloth".into(),
+            links,
+            hinges,
+            faces,
+            pinned,
+            pin_slot,
+            pin_from: targets.clone(),
+            pin_to: targets,
+            backup: ClothState {
+                pos: pos.clone(),
+                prev: pos.clone(),
+            },
+            next: pos.clone(),
+            state: ClothState {
+                prev: pos.clone(),
+                pos,
+            },
+            side: vec![Vec4::ZERO; n],
+            backup_side: Vec::new(),
+            side_fields: 0,
+            caches: Vec::new(),
+            stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
+            dt_prev: None,
+            first_energy: None,
+            stability,
+            extent: (hi - lo).length(),
+            shape,
+        })
+    }
+
+    /// The node name used in errors (default "cloth").
+    pub fn with_name(mut self, node: impl Into<String>) -> Self {
+        self.node = node.into();
+        self
+    }
+
+    pub fn params(&self) -> &ClothParams {
+        &self.params
+    }
+
+    pub fn shape(&self) -> &ClothShape {
+        &self.shape
+    }
+
+    pub fn links(&self) -> &Links {
+        &self.links
+    }
+
+    pub fn hinges(&self) -> &Hinges {
+        &self.hinges
+    }
+
+    pub fn state(&self) -> &ClothState {
+        &self.state
+    }
+
+    pub fn len(&self) -> usize {
+        self.shape.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.shape.is_empty()
+    }
+
+    /// Current particle positions.
+    pub fn positions(&self) -> Vec<Vec3> {
+        self.state.pos.iter().map(|p| p.truncate()).collect()
+    }
+
+    /// The pinned particles, in the order [`ClothSim::set_pin_targets`] takes targets.
+    pub fn pinned(&self) -> &[u32] {
+        &self.pinned
+    }
+
+    /// The stability estimate made at construction ([`StabilityEstimate::substeps_for`] says
+    /// how many substeps a frame needs).
+    pub fn stability(&self) -> &StabilityEstimate {
+        &self.stability
+    }
+
+    /// Places the cloth at `positions`, at rest (previous = current), and makes the pinned
+    /// particles' targets their new positions.
+    pub fn set_positions(&mut self, positions: &[Vec3]) -> Result<()> {
+        if positions.len() != self.len() {
+            return Err(Error::Invalid(format!(
+                "cloth: {} positions for {} particles",
+                positions.len(),
+                self.len()
+            )));
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "cloth: position of particle {i} is not finite"
+            )));
+        }
+        for (s, p) in self.state.pos.iter_mut().zip(positions) {
+            *s = p.extend(s.w);
+        }
+        self.state.prev.clone_from(&self.state.pos);
+        for (k, &p) in self.pinned.iter().enumerate() {
+            self.pin_from[k] = positions[p as usize];
+            self.pin_to[k] = positions[p as usize];
+        }
+        self.side.fill(Vec4::ZERO);
+        self.first_energy = None;
+        Ok(())
+    }
+
+    /// Where the pinned particles must be at the end of the next frame (one per
+    /// [`ClothSim::pinned`] particle, e.g. the skinned positions of the body they hang on);
+    /// they move there linearly over the frame's substeps, and are exactly there at its end.
+    pub fn set_pin_targets(&mut self, targets: &[Vec3]) -> Result<()> {
+        if targets.len() != self.pinned.len() {
+            return Err(Error::Invalid(format!(
+                "cloth: {} pin targets for {} pinned particles",
+                targets.len(),
+                self.pinned.len()
+            )));
+        }
+        if let Some(i) = targets.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "cloth: pin target {i} is not finite"
+            )));
+        }
+        self.pin_to.copy_from_slice(targets);
+        Ok(())
+    }
+
+    /// Advances one body frame of `dt_frame` seconds in `params.substeps` substeps.
+    ///
+    /// `fields_end` are the colliders at the frame's end, applied in order; `fields_start`
+    /// the same colliders at its start (used when `blend_fields` is on; pass `&[]` on the
+    /// first frame or to use the end fields throughout). On a numerical failure the cloth is
+    /// put back where it was at the frame's start and `Error::Numerical` names the frame, the
+    /// substep and what to change.
+    pub fn step_frame(
+        &mut self,
+        fields_start: &[&DistanceField],
+        fields_end: &[&DistanceField],
+        frame: u32,
+        dt_frame: f32,
+    ) -> Result<ClothFrameMetrics> {
+        if !(dt_frame.is_finite() && dt_frame > 0.0) {
+            return Err(Error::Invalid(format!(
+                "cloth: frame duration {dt_frame} must be a positive finite number"
+            )));
+        }
+        let blend = self.params.blend_fields && !fields_start.is_empty();
+        if blend && fields_start.len() != fields_end.len() {
+            return Err(Error::Invalid(format!(
+                "cloth: {} start fields for {} end fields; pass one per collider, or none",
+                fields_start.len(),
+                fields_end.len()
+            )));
+        }
+        let eps = self.params.collision.epsilon;
+        for f in fields_end
+            .iter()
+            .chain(if blend { fields_start } else { &[] })
+        {
+            if eps >= f.far_value() {
+                return Err(Error::Invalid(format!(
+                    "cloth: collision.epsilon {eps} is not inside the collider field's band \
+                     ({} = {} cells); widen the field's band or lower epsilon",
+                    f.far_value(),
+                    f.band
+                )));
+            }
+        }
+        let nf = fields_end.len();
+        if nf != self.side_fields {
+            self.side = vec![Vec4::ZERO; self.len() * nf.max(1)];
+            self.side_fields = nf;
+        }
+        let n_sub = self.params.substeps;
+        let dt = dt_frame / n_sub as f32;
+
+        // Cache the fields' cells around the cloth: its box now, grown by how far it could
+        // go this frame at its current speed (twice), two cells and ε. Reads outside the box
+        // fall back to the fields themselves, so the margin costs speed, never correctness.
+        let mut caches = std::mem::take(&mut self.caches);
+        caches.resize_with(2 * nf, FieldCache::default);
+        if nf > 0 {
+            let speed = self
+                .state
+                .pos
+                .iter()
+                .zip(&self.state.prev)
+                .map(|(p, q)| (*p - *q).truncate().length_squared())
+                .fold(0.0f32, f32::max)
+                .sqrt()
+                / self.dt_prev.unwrap_or(dt);
+            let (lo, hi) = self.state.pos.iter().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())),
+            );
+            for (k, &end) in fields_end.iter().enumerate() {
+                let grow = Vec3::splat(2.0 * speed * dt_frame + 2.0 * end.spec.cell + eps);
+                caches[2 * k + 1].fill(end, lo - grow, hi + grow);
+                if blend && !std::ptr::eq(fields_start[k], end) {
+                    caches[2 * k].fill(fields_start[k], lo - grow, hi + grow);
+                }
+            }
+        }
+        let colliders: Vec<Collider> = fields_end
+            .iter()
+            .enumerate()
+            .map(|(k, &end)| Collider {
+                // A body that did not change (the same field at both ends) needs no blend.
+                start: (blend && !std::ptr::eq(fields_start[k], end)).then(|| CachedField {
+                    field: fields_start[k],
+                    cache: &caches[2 * k],
+                }),
+                end: CachedField {
+                    field: end,
+                    cache: &caches[2 * k + 1],
+                },
+            })
+            .collect();
+        let result = self.run_frame(&colliders, frame, dt_frame);
+        drop(colliders);
+        self.caches = caches;
+        result
+    }
+
+    /// The substeps of one frame, against colliders ready to sample.
+    fn run_frame(
+        &mut self,
+        colliders: &[Collider],
+        frame: u32,
+        dt_frame: f32,
+    ) -> Result<ClothFrameMetrics> {
+        let n_sub = self.params.substeps;
+        let dt = dt_frame / n_sub as f32;
+        self.backup.pos.clone_from(&self.state.pos);
+        self.backup.prev.clone_from(&self.state.prev);
+        self.backup_side.clone_from(&self.side);
+        let backup_dt = self.dt_prev;
+        let ke_start = self.kinetic_energy(self.dt_prev.unwrap_or(dt));
+        let total_mass = self.params.mass as f64 * (self.len() - self.pinned.len()) as f64;
+        let wind2 = self
+            .params
+            .wind
+            .map_or(0.0, |w| w.velocity.length_squared());
+        let scale = self.extent as f64;
+        let energy_scale = total_mass
+            * (self.params.gravity.length() as f64 * scale
+                + wind2 as f64
+                + (scale / dt_frame as f64).powi(2));
+        let ke_limit = self.params.limits.energy_growth as f64 * ke_start.max(energy_scale);
+
+        let mut frame_stats = SubstepStats::new();
+        let mut last = SubstepStats::new();
+        for j in 0..n_sub {
+            let s = if j + 1 == n_sub {
+                1.0
+            } else {
+                (j + 1) as f32 / n_sub as f32
+            };
+            let sub = self.substep(colliders, s, dt);
+            if let Err(what) = self.check(&sub, ke_limit) {
+                self.state.pos.clone_from(&self.backup.pos);
+                self.state.prev.clone_from(&self.backup.prev);
+                self.side.clone_from(&self.backup_side);
+                self.dt_prev = backup_dt;
+                return Err(self.numerical(frame, j, n_sub, dt, dt_frame, what));
+            }
+            // Counts add up over a substep's chunks; over the frame's substeps, `inside` is
+            // the largest (particles, not particle-substeps).
+            let inside = frame_stats.inside.max(sub.inside);
+            frame_stats.merge(&sub);
+            frame_stats.inside = inside;
+            last = sub;
+        }
+        for (k, to) in self.pin_to.iter().enumerate() {
+            self.pin_from[k] = *to;
+        }
+        Ok(self.metrics(frame, dt, colliders, &frame_stats, &last))
+    }
+
+    fn check(&self, sub: &SubstepStats, ke_limit: f64) -> std::result::Result<(), String> {
+        if sub.nonfinite != u32::MAX {
+            return Err(format!(
+                "particle {} reached a non-finite position",
+                sub.nonfinite
+            ));
+        }
+        if sub.overstretched != u32::MAX {
+            return Err(format!(
+                "a spring of particle {} stretched beyond {} times its rest length",
+                sub.overstretched, self.params.limits.max_stretch
+            ));
+        }
+        if sub.kinetic.is_nan() || sub.kinetic > ke_limit {
+            return Err(format!(
+                "kinetic energy {:.3e} J grew beyond the limit {:.3e} J",
+                sub.kinetic, ke_limit
+            ));
+        }
+        Ok(())
+    }
+
+    fn numerical(
+        &self,
+        frame: u32,
+        j: u32,
+        n_sub: u32,
+        dt: f32,
+        dt_frame: f32,
+        what: String,
+    ) -> Error {
+        let est = &self.stability;
+        let needed = est.substeps_for(dt_frame);
+        let hint = if needed > n_sub {
+            format!(
+                "substeps: {needed} (now {n_sub}; the stiffest spring is stable for dt up to \
+                 {:.3e} s, this substep is {dt:.3e} s), or divide the material's stiffness by {:.0}",
+                est.dt_crit,
+                ((dt / (stability::SAFETY * est.dt_crit)).powi(2))
+                    .ceil()
+                    .max(2.0)
+            )
+        } else {
+            format!(
+                "substeps: {} (now {n_sub}; the springs alone are within their stable step \
+                 {:.3e} s, so contact, wind or pin motion moved particles too far per substep), \
+                 or lower the colliders' or pins' speed",
+                (2 * n_sub).max(needed),
+                est.dt_crit
+            )
+        };
+        Error::Numerical {
+            node: self.node.clone(),
+            frame,
+            message: format!("cloth exploded at substep {} of {n_sub}: {what}", j + 1),
+            hint,
+        }
+    }
+
+    /// One substep: every particle's next position, then the buffers rotate.
+    fn substep(&mut self, colliders: &[Collider], s: f32, dt: f32) -> SubstepStats {
+        let ratio = match self.dt_prev {
+            Some(p) if p != dt => dt / p,
+            _ => 1.0,
+        };
+        let ctx = Substep {
+            links: &self.links,
+            hinges: &self.hinges,
+            faces: &self.faces,
+            pin_slot: &self.pin_slot,
+            pin_from: &self.pin_from,
+            pin_to: &self.pin_to,
+            colliders,
+            s,
+            dt,
+            ratio,
+            damping: self.params.damping,
+            gravity: self.params.gravity,
+            wind: self.params.wind.map(|w| (w.velocity, w.drag)),
+            eps: self.params.collision.epsilon,
+            friction: self.params.collision.friction,
+            ground: self.params.collision.ground,
+            max_stretch: self.params.limits.max_stretch,
+        };
+        let nf = colliders.len().max(1);
+        let (pos, prev) = (&self.state.pos, &self.state.prev);
+        self.next
+            .par_chunks_mut(CHUNK)
+            .zip(self.side.par_chunks_mut(CHUNK * nf))
+            .zip(self.stats.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, ((next, side), stats))| {
+                let mut st = SubstepStats::new();
+                update_chunk(c * CHUNK, &ctx, pos, prev, next, side, &mut st);
+                *stats = st;
+            });
+        let mut total = SubstepStats::new();
+        for st in &self.stats {
+            total.merge(st);
+        }
+        total.kinetic *= 0.5 * self.params.mass as f64 / (dt as f64 * dt as f64);
+        total.max_accel = total.max_accel.sqrt() / (dt * dt);
+        std::mem::swap(&mut self.state.prev, &mut self.state.pos);
+        std::mem::swap(&mut self.state.pos, &mut self.next);
+        self.dt_prev = Some(dt);
+        total
+    }
+
+    /// Kinetic energy from the last substep's displacement.
+    fn kinetic_energy(&self, dt: f32) -> f64 {
+        let m = self.params.mass as f64;
+        let mut sum = 0.0;
+        for (p, q) in self.state.pos.iter().zip(&self.state.prev) {
+            if p.w > 0.0 {
+                sum += 0.5 * m * ((*p - *q).truncate() / dt).length_squared() as f64;
+            }
+        }
+        sum
+    }
+
+    /// Kinetic and potential energy of the current state. Kinetic from (x - x_prev)/dt, and
+    /// the potentials averaged over x and x_prev: the half-step pairing under which Verlet's
+    /// energy error is second order, not first.
+    pub fn energy(&self) -> Energy {
+        self.frame_pass(&[]).energy
+    }
+
+    /// One pass over the particles after a frame: energies, the largest strain, and the
+    /// particles still closer than ε to a collider (or the ground). Partial sums per fixed
+    /// chunk, then over chunks in order, so the result does not depend on the threads.
+    fn frame_pass(&self, colliders: &[Collider]) -> FramePass {
+        let n = self.len();
+        let parts: Vec<FramePass> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut part = FramePass::default();
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    self.particle_pass(i, colliders, &mut part);
+                }
+                part
+            })
+            .collect();
+        let mut total = FramePass::default();
+        for p in &parts {
+            total.energy.add(&p.energy);
+            total.close += p.close;
+            total.close_depth = total.close_depth.max(p.close_depth);
+            total.strain = total.strain.max(p.strain);
+        }
+        total
+    }
+
+    fn particle_pass(&self, i: usize, colliders: &[Collider], part: &mut FramePass) {
+        let (pos, prev) = (&self.state.pos, &self.state.prev);
+        let (u_pos, strain) = spring_energy(i, &self.links, pos);
+        let (u_prev, _) = spring_energy(i, &self.links, prev);
+        part.energy.springs += 0.5 * (u_pos + u_prev) as f64;
+        part.strain = part.strain.max(strain);
+        let h = &self.hinges;
+        for &r in &h.refs[h.offsets[i] as usize..h.offsets[i + 1] as usize] {
+            let hinge = &h.hinges[(r / 4) as usize];
+            for x in [pos, prev] {
+                if let Some((theta, _)) =
+                    hinge_angle_gradient(hinge.v.map(|v| x[v as usize].truncate()))
+                {
+                    // A quarter per role, half per time level.
+                    part.energy.bending +=
+                        0.125 * hinge_energy(hinge.c, theta - hinge.rest_angle) as f64;
+                }
+            }
+        }
+        if pos[i].w == 0.0 {
+            return;
+        }
+        let m = self.params.mass as f64;
+        let dt = self.dt_prev.unwrap_or(1.0);
+        let x = pos[i].truncate();
+        part.energy.kinetic += 0.5 * m * ((x - prev[i].truncate()) / dt).length_squared() as f64;
+        let mid = 0.5 * (x + prev[i].truncate());
+        part.energy.gravity -= m * self.params.gravity.dot(mid) as f64;
+        // Residual contact, against the end-of-frame fields.
+        let eps = self.params.collision.epsilon;
+        let nf = colliders.len().max(1);
+        let mut worst = f32::NEG_INFINITY;
+        for (k, c) in colliders.iter().enumerate() {
+            if let Some(s) = contact::signed_sample(c, x, x, 1.0, self.side[i * nf + k], eps) {
+                worst = worst.max(eps - s.distance);
+            }
+        }
+        if let Some(h) = self.params.collision.ground {
+            worst = worst.max(h + eps - x.y);
+        }
+        if worst > 0.0 {
+            part.close += 1;
+            part.close_depth = part.close_depth.max(worst);
+        }
+    }
+
+    /// Internal forces (springs and bending) on each particle at the current positions: zero
+    /// at rest, whatever rigid motion the cloth has made.
+    pub fn forces(&self) -> Vec<Vec3> {
+        let pos = &self.state.pos;
+        (0..self.len())
+            .map(|i| {
+                let (f, _) = match self.links.law {
+                    SpringLaw::Linear => spring_force::<false>(i, &self.links, pos, f32::INFINITY),
+                    SpringLaw::Quadratic => {
+                        spring_force::<true>(i, &self.links, pos, f32::INFINITY)
+                    }
+                };
+                f + hinge_force(i, &self.hinges, pos)
+            })
+            .collect()
+    }
+
+    fn metrics(
+        &mut self,
+        frame: u32,
+        dt: f32,
+        colliders: &[Collider],
+        frame_stats: &SubstepStats,
+        last: &SubstepStats,
+    ) -> ClothFrameMetrics {
+        let pass = self.frame_pass(colliders);
+        let total = pass.energy.total();
+        let first = *self.first_energy.get_or_insert(total);
+        ClothFrameMetrics {
+            frame,
+            substeps: self.params.substeps,
+            dt_substep: dt,
+            max_strain: pass.strain,
+            contacts: last.contacts,
+            inside: frame_stats.inside,
+            max_depth: frame_stats.max_depth,
+            close: pass.close,
+            close_max_depth: pass.close_depth,
+            max_accel: frame_stats.max_accel,
+            band_misses: frame_stats.band_misses,
+            kinetic: pass.energy.kinetic,
+            energy: pass.energy,
+            energy_drift: total - first,
+            energy_drift_rel: if first != 0.0 {
+                (total - first) / first.abs()
+            } else {
+                0.0
+            },
+        }
+    }
+
+    /// The cloth as a mesh (the garment's own vertex layout and UVs, or the grid's), with
+    /// area-weighted normals.
+    pub fn to_mesh(&self) -> Mesh {
+        let pos = &self.state.pos;
+        let normals: Vec<Vec3> = (0..self.len())
+            .map(|i| self.faces.area_normal(i, pos).normalize_or_zero())
+            .collect();
+        let out = &self.shape.out_particle;
+        Mesh {
+            positions: out.iter().map(|&p| pos[p as usize].truncate()).collect(),
+            triangles: self.shape.out_triangles.clone(),
+            normals: out.iter().map(|&p| normals[p as usize]).collect(),
+            uvs: self.shape.out_uvs.clone(),
+        }
+    }
+}
+
+/// One chunk of particles through one substep, as a few short loops rather than one long
+/// one: forces (written into `next` as scratch), integration, then per collider the field
+/// samples and the responses, then the ground and the stats. A short loop body lets the
+/// processor overlap several particles' long dependency chains (square roots, divisions,
+/// field reads), which one long body does not. Each particle still sees the colliders in
+/// order, then the ground, exactly as one loop would do it.
+#[inline(always)]
+fn update_chunk(
+    base: usize,
+    ctx: &Substep,
+    pos: &[Vec4],
+    prev: &[Vec4],
+    next: &mut [Vec4],
+    side: &mut [Vec4],
+    st: &mut SubstepStats,
+) {
+    let nf = ctx.colliders.len().max(1);
+    let quad = ctx.links.law == SpringLaw::Quadratic;
+    let pinned = |i: usize| ctx.pin_slot[i] != u32::MAX;
+    for (k, out) in next.iter_mut().enumerate() {
+        let i = base + k;
+        let (mut f, over) = if quad {
+            spring_force::<true>(i, ctx.links, pos, ctx.max_stretch)
+        } else {
+            spring_force::<false>(i, ctx.links, pos, ctx.max_stretch)
+        };
+        if over {
+            st.overstretched = st.overstretched.min(i as u32);
+        }
+        if !ctx.hinges.hinges.is_empty() {
+            f += hinge_force(i, ctx.hinges, pos);
+        }
+        *out = f.extend(0.0);
+    }
+    for (k, out) in next.iter_mut().enumerate() {
+        *out = integrate(base + k, ctx, pos, prev, *out);
+    }
+    let mut samples = [None; CHUNK];
+    for (c, collider) in ctx.colliders.iter().enumerate() {
+        for (k, sample) in samples.iter_mut().enumerate().take(next.len()) {
+            let i = base + k;
+            *sample = if pinned(i) {
+                None
+            } else {
+                let (x, from) = (next[k].truncate(), pos[i].truncate());
+                contact::signed_sample(collider, x, from, ctx.s, side[k * nf + c], ctx.eps)
+            };
+        }
+        for (k, out) in next.iter_mut().enumerate() {
+            let Some(sample) = &samples[k] else { continue };
+            let mut x = out.truncate();
+            let from = pos[base + k].truncate();
+            let hit = contact::respond(
+                &mut x,
+                from,
+                sample,
+                &mut side[k * nf + c],
+                ctx.eps,
+                ctx.friction,
+            );
+            if let Some(hit) = hit {
+                record(st, hit);
+                st.band_misses += sample.band_miss as u32;
+            }
+            *out = x.extend(out.w);
+        }
+    }
+    for (k, out) in next.iter_mut().enumerate() {
+        let i = base + k;
+        if pinned(i) {
+            continue;
+        }
+        let (from, mut x) = (pos[i].truncate(), out.truncate());
+        if let Some(h) = ctx.ground
+            && let Some(hit) = contact::ground(&mut x, from, h, ctx.eps, ctx.friction)
+        {
+            record(st, hit);
+            *out = x.extend(out.w);
+        }
+        if !x.is_finite() {
+            st.nonfinite = st.nonfinite.min(i as u32);
+        }
+        // Squared step and squared change of step: scaled to energy and acceleration once
+        // per substep, not per particle.
+        let step = x - from;
+        let moved = (pos[i] - prev[i]).truncate() * ctx.ratio;
+        st.kinetic += step.length_squared() as f64;
+        st.max_accel = st.max_accel.max((step - moved).length_squared());
+    }
+}
+
+/// H eq. 10 for particle `i` under the force `f` (pinned particles: their target), before
+/// contacts; w = the inverse mass.
+#[inline(always)]
+fn integrate(i: usize, ctx: &Substep, pos: &[Vec4], prev: &[Vec4], f: Vec4) -> Vec4 {
+    let xi4 = pos[i];
+    let slot = ctx.pin_slot[i];
+    if slot != u32::MAX {
+        let (a, b) = (ctx.pin_from[slot as usize], ctx.pin_to[slot as usize]);
+        let p = if ctx.s >= 1.0 { b } else { a + (b - a) * ctx.s };
+        return p.extend(0.0);
+    }
+    let inv_m = xi4.w;
+    let moved = (xi4 - prev[i]) * ctx.ratio;
+    let mut f = f;
+    if let Some((wind, drag)) = ctx.wind {
+        let n = ctx.faces.area_normal(i, pos);
+        let rel = wind - moved.truncate() / ctx.dt;
+        f += (drag * n.normalize_or_zero().dot(rel) * n).extend(0.0);
+    }
+    let xn = xi4 + ctx.damping * moved + (f * inv_m + ctx.gravity.extend(0.0)) * (ctx.dt * ctx.dt);
+    xn.truncate().extend(inv_m)
+}
+
+#[inline(always)]
+fn record(st: &mut SubstepStats, hit: Hit) {
+    st.contacts += 1;
+    st.inside += hit.inside as u32;
+    st.max_depth = st.max_depth.max(hit.depth);
+}
+
+/// Sum of the spring forces on particle `i`, four springs per step, and whether one of them
+/// is longer than `max_stretch` times its rest length. `QUAD` picks T eq. 1's law.
+#[inline(always)]
+fn spring_force<const QUAD: bool>(
+    i: usize,
+    links: &Links,
+    pos: &[Vec4],
+    max_stretch: f32,
+) -> (Vec3, bool) {
+    let xi = pos[i];
+    let (px, py, pz) = (Vec4::splat(xi.x), Vec4::splat(xi.y), Vec4::splat(xi.z));
+    let (mut fx, mut fy, mut fz) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
+    let mut over = false;
+    let limit = Vec4::splat(max_stretch);
+    for q in links.of(i) {
+        let LinkQuad {
+            other,
+            rest,
+            k_stretch,
+            k_compress,
+        } = *q;
+        // Rows of the transposed 4x4: x, y, z (and w) of the four other ends.
+        let t = Mat4::from_cols(
+            pos[other[0] as usize],
+            pos[other[1] as usize],
+            pos[other[2] as usize],
+            pos[other[3] as usize],
+        )
+        .transpose();
+        let dx = t.x_axis - px;
+        let dy = t.y_axis - py;
+        let dz = t.z_axis - pz;
+        let len = (dx * dx + dy * dy + dz * dz).sqrt();
+        let rest = Vec4::from_array(rest);
+        let e = len - rest;
+        let k = Vec4::select(
+            e.cmpge(Vec4::ZERO),
+            Vec4::from_array(k_stretch),
+            Vec4::from_array(k_compress),
+        );
+        let mut c = k * e / len.max(Vec4::splat(TINY));
+        if QUAD {
+            c *= e.abs();
+        }
+        fx += c * dx;
+        fy += c * dy;
+        fz += c * dz;
+        over |= len.cmpgt(rest * limit).any();
+    }
+    (
+        Vec3::new(fx.element_sum(), fy.element_sum(), fz.element_sum()),
+        over,
+    )
+}
+
+/// Half the potential energy of particle `i`'s springs (each is listed at both ends) and the
+/// largest |length / rest - 1| among them, four springs per step.
+#[inline]
+fn spring_energy(i: usize, links: &Links, pos: &[Vec4]) -> (f32, f32) {
+    let xi = pos[i];
+    let (px, py, pz) = (Vec4::splat(xi.x), Vec4::splat(xi.y), Vec4::splat(xi.z));
+    let quad = links.law == SpringLaw::Quadratic;
+    let (mut u, mut strain) = (Vec4::ZERO, Vec4::ZERO);
+    for q in links.of(i) {
+        let t = Mat4::from_cols(
+            pos[q.other[0] as usize],
+            pos[q.other[1] as usize],
+            pos[q.other[2] as usize],
+            pos[q.other[3] as usize],
+        )
+        .transpose();
+        let (dx, dy, dz) = (t.x_axis - px, t.y_axis - py, t.z_axis - pz);
+        let rest = Vec4::from_array(q.rest);
+        let e = (dx * dx + dy * dy + dz * dz).sqrt() - rest;
+        let k = Vec4::select(
+            e.cmpge(Vec4::ZERO),
+            Vec4::from_array(q.k_stretch),
+            Vec4::from_array(q.k_compress),
+        );
+        u += if quad {
+            k * e.abs() * e * e * (0.5 / 3.0)
+        } else {
+            k * e * e * 0.25
+        };
+        strain = strain.max(e.abs() / rest.max(Vec4::splat(TINY)));
+    }
+    (u.element_sum(), strain.max_element())
+}
+
+/// Sum of the hinge bending forces on particle `i`: -U'(θ - θ_rest) dθ/dx_i per hinge.
+#[inline]
+fn hinge_force(i: usize, hinges: &Hinges, pos: &[Vec4]) -> Vec3 {
+    let mut f = Vec3::ZERO;
+    for &r in &hinges.refs[hinges.offsets[i] as usize..hinges.offsets[i + 1] as usize] {
+        let h = &hinges.hinges[(r / 4) as usize];
+        if let Some((theta, g)) = hinge_angle_gradient(h.v.map(|v| pos[v as usize].truncate())) {
+            f -= hinge_slope(h.c, theta - h.rest_angle) * g[(r % 4) as usize];
+        }
+    }
+    f
+}

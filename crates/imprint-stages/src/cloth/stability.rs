@@ -1,0 +1,295 @@
+//! How large a substep the explicit integrator survives, predicted before running, and the
+//! stress map that checks the prediction.
+//!
+//! Verlet with damping d on one mode of angular frequency ω is stable for
+//! ω dt ≤ sqrt(2 (1 + d)) (2 when undamped: H's dt ≲ 2 sqrt(m / k) for one spring on one
+//! mass). A cloth's fastest mode is found two ways:
+//! - a bound: Gershgorin on M⁻¹K, 2 Σ k / m over each particle's springs (never above the
+//!   true limit; up to ~√2 too cautious in dt on a grid);
+//! - an estimate: power iteration on M⁻¹K, the springs' stiffness matrix at rest (pinned
+//!   particles fixed), which finds the true fastest mode to a few percent.
+//!
+//! Linear springs have stiffness k whatever their length. Tokoi's quadratic springs have
+//! stiffness 2 k |e|, zero at rest: they are taken at a working strain of
+//! [`REFERENCE_STRAIN`]. Hinge bending has stiffness c sin|φ| (zero when flat), taken at its
+//! largest, c, through a Gershgorin bound added to both (λ_max(A + B) ≤ λ_max(A) + λ_max(B)).
+
+use super::cpu::ClothSim;
+use super::params::ClothParams;
+use super::springs::{Hinges, Links, hinge_angle_gradient};
+use glam::Vec3;
+use imprint_core::{Error, Result};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// The strain at which Tokoi's quadratic springs are linearised for the estimate.
+pub const REFERENCE_STRAIN: f32 = 0.1;
+
+/// A substep is taken as safe up to this fraction of the estimated critical step.
+pub const SAFETY: f32 = 0.9;
+
+const POWER_ITERATIONS: usize = 100;
+
+/// The largest stable substep, predicted from the rest state.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StabilityEstimate {
+    /// Power-iteration estimate of the critical substep, s (a few percent above the truth
+    /// at worst: use [`StabilityEstimate::substeps_for`], which keeps a margin).
+    pub dt_crit: f32,
+    /// Gershgorin bound: every substep up to this is stable, s.
+    pub dt_crit_bound: f32,
+    /// The fastest mode's angular frequency (power iteration), rad/s.
+    pub omega_max: f32,
+    /// The particle with the largest Σ k / m, and that value (1/s²).
+    pub stiffest_particle: u32,
+    pub stiffest_k_over_m: f32,
+}
+
+impl StabilityEstimate {
+    /// Substeps a frame of `dt_frame` needs to stay at or below `SAFETY * dt_crit`.
+    pub fn substeps_for(&self, dt_frame: f32) -> u32 {
+        if !(self.dt_crit.is_finite() && self.dt_crit > 0.0) {
+            return 1;
+        }
+        (dt_frame as f64 / (SAFETY * self.dt_crit) as f64)
+            .ceil()
+            .clamp(1.0, u32::MAX as f64) as u32
+    }
+
+    /// A warning when `substeps` per frame of `dt_frame` is predicted to blow up.
+    pub fn warning(&self, substeps: u32, dt_frame: f32) -> Option<String> {
+        let needed = self.substeps_for(dt_frame);
+        (substeps < needed).then(|| {
+            format!(
+                "cloth: {substeps} substeps of {:.3e} s exceed the stable step {:.3e} s of the \
+                 stiffest springs (particle {}); use substeps: {needed} or more",
+                dt_frame / substeps as f32,
+                self.dt_crit,
+                self.stiffest_particle
+            )
+        })
+    }
+}
+
+/// Estimates the critical substep of a cloth at rest.
+pub fn estimate(
+    links: &Links,
+    hinges: &Hinges,
+    rest: &[Vec3],
+    pinned: &[bool],
+    mass: f32,
+    damping: f32,
+) -> StabilityEstimate {
+    let n = rest.len();
+    let law = links.law;
+    // Per-particle stiffness of each link at the working point.
+    let k_of = |ks: f32, l: f32| law.stiffness(ks, REFERENCE_STRAIN * l);
+    let mut sum_k = vec![0.0f64; n];
+    for (i, s) in sum_k.iter_mut().enumerate() {
+        for q in links.of(i) {
+            for l in 0..4 {
+                *s += k_of(q.k_stretch[l], q.rest[l]) as f64;
+            }
+        }
+    }
+    // Hinges: Gauss-Newton Hessian c ∇θ ∇θᵀ, Gershgorin row sums.
+    let mut hinge_row = vec![0.0f64; n];
+    for h in &hinges.hinges {
+        if let Some((_, g)) = hinge_angle_gradient(h.v.map(|v| rest[v as usize])) {
+            let total: f64 = g.iter().map(|g| g.length() as f64).sum();
+            for (r, &v) in h.v.iter().enumerate() {
+                hinge_row[v as usize] += h.c as f64 * g[r].length() as f64 * total;
+            }
+        }
+    }
+    let m = mass as f64;
+    let free = |i: usize| !pinned[i];
+    let (mut stiffest, mut k_max, mut lambda_bound, mut lambda_hinge) =
+        (0u32, 0.0f64, 0.0f64, 0.0f64);
+    for i in (0..n).filter(|&i| free(i)) {
+        if sum_k[i] > k_max {
+            k_max = sum_k[i];
+            stiffest = i as u32;
+        }
+        lambda_bound = lambda_bound.max(2.0 * sum_k[i] / m);
+        lambda_hinge = lambda_hinge.max(hinge_row[i] / m);
+    }
+
+    // Power iteration on K v = Σ k (n nᵀ)(v_i - v_j), in f64, from a fixed pseudo-random start.
+    let mut v: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            if free(i) {
+                let h = |k: u64| {
+                    let x = (i as u64 * 3 + k + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                    ((x >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+                };
+                [h(0), h(1), h(2)]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let mut w = vec![[0.0f64; 3]; n];
+    let mut lambda = 0.0f64;
+    for _ in 0..POWER_ITERATIONS {
+        let norm = v.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+        if norm == 0.0 {
+            break;
+        }
+        v.iter_mut().flatten().for_each(|x| *x /= norm);
+        // Each particle's row on its own (in parallel; no sum crosses particles).
+        let vr = &v;
+        w.par_iter_mut().enumerate().for_each(|(i, out)| {
+            let mut acc = glam::DVec3::ZERO;
+            if free(i) {
+                for q in links.of(i) {
+                    for l in 0..4 {
+                        let j = q.other[l] as usize;
+                        let k = k_of(q.k_stretch[l], q.rest[l]) as f64;
+                        let d = (rest[j] - rest[i]).as_dvec3();
+                        let len = d.length();
+                        if k == 0.0 || j == i || len == 0.0 {
+                            continue;
+                        }
+                        let nn = d / len;
+                        let dv = glam::DVec3::from(vr[i]) - glam::DVec3::from(vr[j]);
+                        acc += nn * (k * nn.dot(dv) / m);
+                    }
+                }
+            }
+            *out = acc.to_array();
+        });
+        lambda = v
+            .iter()
+            .zip(&w)
+            .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+            .sum::<f64>();
+        std::mem::swap(&mut v, &mut w);
+    }
+    let limit = (2.0 * (1.0 + damping as f64)).sqrt();
+    let dt = |lambda: f64| {
+        if lambda > 0.0 {
+            (limit / lambda.sqrt()) as f32
+        } else {
+            f32::INFINITY
+        }
+    };
+    let lambda = lambda.min(lambda_bound) + lambda_hinge;
+    StabilityEstimate {
+        dt_crit: dt(lambda),
+        dt_crit_bound: dt(lambda_bound + lambda_hinge),
+        omega_max: lambda.sqrt() as f32,
+        stiffest_particle: stiffest,
+        stiffest_k_over_m: (k_max / m) as f32,
+    }
+}
+
+/// One cell of the stress map.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StressCase {
+    /// Multiplier of every stiffness constant.
+    pub stiffness_scale: f32,
+    /// Substep over the estimated critical step.
+    pub dt_ratio: f32,
+    pub dt_substep: f32,
+    /// The estimate says it is stable (`dt_ratio` ≤ 1).
+    pub predicted_stable: bool,
+    /// Below the Gershgorin bound (stable for certain, in the linear regime).
+    pub below_bound: bool,
+    pub outcome: StressOutcome,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum StressOutcome {
+    /// Ran every frame; the largest strain seen.
+    Stable { max_strain: f32 },
+    /// Stopped with `Error::Numerical`.
+    Exploded { frame: u32, message: String },
+}
+
+impl StressOutcome {
+    pub fn is_stable(&self) -> bool {
+        matches!(self, StressOutcome::Stable { .. })
+    }
+}
+
+/// The table behind `imprint stress cloth`: for each stiffness multiplier (e.g. decades
+/// 1, 10, 100) and each substep as a fraction of the estimated critical step (e.g. 0.5..2),
+/// runs `params`' cloth (no colliders, every particle nudged by 1% of the shortest rest
+/// length, pseudo-randomly but reproducibly) for `frames` frames of `params.substeps`
+/// substeps and records whether it blew up. Rows by stiffness, then ratio.
+pub fn stress_map(
+    params: &ClothParams,
+    assets: &super::ClothAssets,
+    stiffness_scales: &[f32],
+    dt_ratios: &[f32],
+    frames: u32,
+) -> Result<Vec<StressCase>> {
+    if let Some(bad) = stiffness_scales
+        .iter()
+        .chain(dt_ratios)
+        .find(|x| !(x.is_finite() && **x > 0.0))
+    {
+        return Err(Error::Invalid(format!(
+            "stress map: scales and ratios must be positive finite numbers, got {bad}"
+        )));
+    }
+    let mut out = Vec::new();
+    for &scale in stiffness_scales {
+        let mut p = params.clone();
+        p.scale_stiffness(scale);
+        let base = ClothSim::from_assets(&p, assets)?;
+        let est = *base.stability();
+        if !est.dt_crit.is_finite() {
+            return Err(Error::Invalid(
+                "stress map: the cloth has no stiffness to be unstable with".into(),
+            ));
+        }
+        let shortest = base
+            .links()
+            .quads
+            .iter()
+            .flat_map(|q| q.rest)
+            .filter(|&l| l > 0.0)
+            .fold(f32::INFINITY, f32::min);
+        let nudged: Vec<Vec3> = base
+            .positions()
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let h = |k: u64| {
+                    let v = (i as u64 * 3 + k + 7).wrapping_mul(0xD1B5_4A32_D192_ED03);
+                    ((v >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+                };
+                *x + 0.02 * shortest * Vec3::new(h(0), h(1), h(2))
+            })
+            .collect();
+        for &ratio in dt_ratios {
+            let mut sim = ClothSim::from_assets(&p, assets)?;
+            sim.set_positions(&nudged)?;
+            let dt = ratio * est.dt_crit;
+            let dt_frame = dt * p.substeps as f32;
+            let mut max_strain = 0.0f32;
+            let mut outcome = None;
+            for f in 0..frames {
+                match sim.step_frame(&[], &[], f, dt_frame) {
+                    Ok(m) => max_strain = max_strain.max(m.max_strain),
+                    Err(Error::Numerical { frame, message, .. }) => {
+                        outcome = Some(StressOutcome::Exploded { frame, message });
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            out.push(StressCase {
+                stiffness_scale: scale,
+                dt_ratio: ratio,
+                dt_substep: dt,
+                predicted_stable: ratio <= 1.0,
+                below_bound: dt <= est.dt_crit_bound,
+                outcome: outcome.unwrap_or(StressOutcome::Stable { max_strain }),
+            });
+        }
+    }
+    Ok(out)
+}
