@@ -642,3 +642,51 @@ fn unstable_cloth_is_warned_stopped_and_mapped() {
     }
     assert!(text.contains("predicted"), "{text}");
 }
+
+/// The Cloth node on the GPU (lavapipe in CI) lands where the CPU cloth does.
+#[test]
+fn gpu_cloth_agrees_with_cpu_through_the_pipeline() {
+    let nodes = r#"        "ball": Mesh(primitive: Sphere(radius: 0.3, segments: 48, rings: 24)),
+        "vox": Voxelize(mesh: "ball", grid: Fit(resolution: 48)),
+        "field": DistanceField(boundary: "vox", band: 3, measure: Never),
+        "cloth": Cloth(colliders: ["field"], params: (
+            shape: Grid(size: (0.8, 0.8), resolution: (12, 12), center: (0, 0.33, 0)),
+            material: Harada(k_structural: 20.0, k_shear: 5.0),
+            collision: (epsilon: 0.01, friction: 0.3),
+            substeps: 16)),
+        "obj": WriteMesh(mesh: "cloth"),"#;
+    let c = case(nodes);
+    let f = c.file.to_str().unwrap();
+    run_ok(
+        &["run", f, "--out", "cpu", "--backend", "cpu"],
+        c.dir.path(),
+    );
+    let gpu = imprint(
+        &["run", f, "--out", "gpu", "--backend", "gpu"],
+        c.dir.path(),
+    );
+    let err = String::from_utf8_lossy(&gpu.stderr);
+    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
+        assert!(
+            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "IMPRINT_REQUIRE_GPU=1 but: {err}"
+        );
+        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+        return;
+    }
+    assert_eq!(gpu.status.code(), Some(0), "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["nodes"]["cloth"]["backend"], "gpu");
+    // Frame 1: the cloth (3 cm above the ball's top) has reached it; both paths agree.
+    let a = imprint_core::Mesh::load_obj(&c.dir.path().join("cpu/obj/cloth_0001.obj")).unwrap();
+    let b = imprint_core::Mesh::load_obj(&c.dir.path().join("gpu/obj/cloth_0001.obj")).unwrap();
+    let worst = a
+        .positions
+        .iter()
+        .zip(&b.positions)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-4, "CPU and GPU cloth differ by {worst} m");
+}

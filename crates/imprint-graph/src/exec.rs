@@ -20,6 +20,7 @@ use imprint_render::gpu_frame::GpuRenderer;
 use imprint_render::sequence::{ContactSheet, GifWriter};
 use imprint_render::slice::SliceOptions;
 use imprint_stages::cloth::ClothSim;
+use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
 use imprint_stages::depth::{HeightRegion, HeightView};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
@@ -99,6 +100,10 @@ enum Stage {
         sim: Box<ClothSim>,
         /// The colliders' fields at the end of the previous frame: the start of this one.
         previous: Vec<Arc<DistanceField>>,
+        /// The GPU cloth when the node runs on the GPU, and the colliders it saw last frame
+        /// (uploaded once per field: a static field is not uploaded again).
+        gpu: Option<Box<GpuCloth>>,
+        gpu_previous: Vec<(Arc<DistanceField>, Arc<GpuCollider>)>,
     },
     Heightmap {
         input: String,
@@ -155,6 +160,7 @@ pub fn run(
             Stage::Voxelize { gpu, .. } | Stage::Field { gpu, .. } => *gpu,
             Stage::Heightmap { gpu, .. } => gpu.is_some(),
             Stage::Render { gpu, .. } => gpu.is_some(),
+            Stage::Cloth { gpu, .. } => gpu.is_some(),
             _ => false,
         };
         report.nodes.insert(
@@ -278,24 +284,51 @@ pub fn run(
                     colliders,
                     sim,
                     previous,
+                    gpu: gpu_cloth,
+                    gpu_previous,
                 } => {
                     let end = colliders
                         .iter()
                         .map(|c| cpu_field(c, &values, &mut cpu_fields, gpu))
                         .collect::<crate::Result<Vec<_>>>()?;
-                    let end_refs: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
-                    let start_refs: Vec<&DistanceField> = previous.iter().map(|f| &**f).collect();
-                    let m = sim.step_frame(&start_refs, &end_refs, frame, 1.0 / plan.file.fps)?;
-                    *previous = end;
+                    let dt = 1.0 / plan.file.fps;
+                    let (m, mesh) = if let Some(g) = gpu_cloth {
+                        let ctx = gpu.expect("GPU chosen at build");
+                        let mut now = Vec::with_capacity(end.len());
+                        for (k, f) in end.iter().enumerate() {
+                            let same = gpu_previous.get(k).filter(|(cf, _)| Arc::ptr_eq(cf, f));
+                            let up = match same {
+                                Some((_, u)) => u.clone(),
+                                None => Arc::new(GpuCollider::from_field(ctx, f)?),
+                            };
+                            now.push((f.clone(), up));
+                        }
+                        let start: Vec<&GpuCollider> =
+                            gpu_previous.iter().map(|(_, u)| &**u).collect();
+                        let end_refs: Vec<&GpuCollider> = now.iter().map(|(_, u)| &**u).collect();
+                        let m = g.step_frame(ctx, &start, &end_refs, frame, dt)?;
+                        *gpu_previous = now;
+                        (
+                            serde_json::to_value(m).expect("plain data"),
+                            g.to_mesh(ctx)?,
+                        )
+                    } else {
+                        let end_refs: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
+                        let start_refs: Vec<&DistanceField> =
+                            previous.iter().map(|f| &**f).collect();
+                        let m = sim.step_frame(&start_refs, &end_refs, frame, dt)?;
+                        *previous = end;
+                        (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
+                    };
                     let per_frame = nr
                         .metrics
                         .entry("per_frame".into())
                         .or_insert_with(|| serde_json::Value::Array(Vec::new()));
                     if let serde_json::Value::Array(a) = per_frame {
-                        a.push(serde_json::to_value(m).expect("plain data"));
+                        a.push(m);
                     }
                     nr.metrics.insert("particles".into(), sim.len().into());
-                    values.insert(name.clone(), Value::Mesh(Arc::new(sim.to_mesh())));
+                    values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
                     true
                 }
                 Stage::Heightmap {
@@ -817,10 +850,25 @@ fn build_stages(
                 {
                     eprintln!("warning: node '{name}': {w}");
                 }
+                let gpu_cloth = if choose_gpu(want, name, gpu)? {
+                    match GpuCloth::new(gpu.expect("chosen"), &sim) {
+                        Ok(g) => Some(Box::new(g.with_name(name.clone()))),
+                        // Auto falls back to the CPU for what the GPU path does not model.
+                        Err(e) if want == Backend::Auto => {
+                            eprintln!("note: node '{name}' runs on the CPU: {e}");
+                            None
+                        }
+                        Err(e) => return Err(e.into()),
+                    }
+                } else {
+                    None
+                };
                 Stage::Cloth {
                     colliders: c.colliders.clone(),
                     sim: Box::new(sim),
                     previous: Vec::new(),
+                    gpu: gpu_cloth,
+                    gpu_previous: Vec::new(),
                 }
             }
             NodeSpec::Heightmap(h) => {

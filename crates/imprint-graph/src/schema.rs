@@ -74,6 +74,8 @@ pub struct ClothNode {
     pub colliders: Vec<String>,
     /// Shape, material, pins, contact, substeps: `imprint_stages::cloth::ClothParams`.
     pub params: ClothParams,
+    #[serde(default)]
+    pub backend: Option<Backend>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -516,6 +518,7 @@ impl NodeSpec {
                 | NodeSpec::DistanceField(_)
                 | NodeSpec::Heightmap(_)
                 | NodeSpec::Render(_)
+                | NodeSpec::Cloth(_)
         )
     }
 
@@ -526,6 +529,7 @@ impl NodeSpec {
             NodeSpec::DistanceField(f) => f.backend,
             NodeSpec::Heightmap(h) => h.backend,
             NodeSpec::Render(r) => r.backend,
+            NodeSpec::Cloth(c) => c.backend,
             _ => None,
         }
     }
