@@ -7,6 +7,8 @@
 #     /usr/bin/python3 with --system-site-packages, so one interpreter sees both libraries.
 #     Default place: benches/compare/.venv (git-ignored); override with IMPRINT_BASELINES_VENV.
 #     baselines.py re-executes itself under that venv when it exists.
+#   Taichi (cloth section's baseline, cloth_taichi.py): from PyPI (taichi) into the same venv;
+#     cloth_taichi.py re-executes itself under it the same way.
 #
 # Always exits 0: a baseline that cannot be installed is reported here and by baselines.py
 # as unavailable, and the benchmarks run without it.
@@ -73,6 +75,18 @@ else
       done
       [ $ok -eq 1 ] || log "pip: Open3D unavailable; baselines.py will report it as such"
     fi
+    if "$VENV/bin/python" -c "import taichi" >/dev/null 2>&1; then
+      log "pip: taichi already importable"
+    else
+      log "pip: installing taichi into $VENV"
+      if "$VENV/bin/python" -m pip install -q --disable-pip-version-check taichi \
+           >/tmp/imprint-compare-pip-taichi.log 2>&1 \
+         && "$VENV/bin/python" -c "import taichi" >>/tmp/imprint-compare-pip-taichi.log 2>&1; then
+        log "pip: installed taichi"
+      else
+        log "pip: taichi FAILED: $(grep -E 'ERROR|Error' /tmp/imprint-compare-pip-taichi.log | tail -n 2 | tr '\n' ' '); the cloth section will report Taichi as not run"
+      fi
+    fi
   fi
 fi
 
@@ -80,5 +94,7 @@ fi
 PY="$SYS_PY"; [ -x "$VENV/bin/python" ] && PY="$VENV/bin/python"
 if [ -x "$PY" ]; then
   IMPRINT_BASELINES_NO_REEXEC=1 "$PY" "$HERE/baselines.py" --versions 2>&1 | sed 's/^/[compare\/install] /' || true
+  TI_VER="$("$PY" -c "import taichi; print('.'.join(map(str, taichi.__version__)))" 2>/dev/null | grep -v '^\[Taichi\]')"
+  if [ -n "$TI_VER" ]; then log "taichi $TI_VER (cloth_taichi.py)"; else log "taichi: not importable by $PY"; fi
 fi
 exit 0

@@ -1,5 +1,6 @@
 //! Shared pieces of the benchmark harness: timing, machine description, baselines, GPU table.
 
+pub mod cloth;
 pub mod render;
 
 use imprint_core::{DistanceField, GridSpec, Mesh};

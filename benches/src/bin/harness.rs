@@ -23,11 +23,12 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 4] = [
+const SECTIONS: [(&str, &str); 5] = [
     ("field", "distance fields on the CPU: H Table 1 and triangle-count scaling"),
     ("baselines", "the same fields through OpenVDB and Open3D, same run"),
     ("gpu", "the GPU voxelise + field path"),
     ("render", "frames and depth maps, CPU and GPU"),
+    ("cloth", "the cloth against Taichi, and H's bunny scene"),
 ];
 
 fn main() {
@@ -73,6 +74,7 @@ fn main() {
             }
             "gpu" => format!("## 4. GPU path\n\n{}", gpu_table(&root, repeat)),
             "render" => imprint_benches::render::section(&root, repeat),
+            "cloth" => imprint_benches::cloth::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(
