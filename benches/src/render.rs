@@ -92,7 +92,10 @@ pub fn section(root: &Path, repeat: usize) -> String {
          picture. Median of {} runs.\n",
         repeat.min(7)
     );
-    let _ = writeln!(s, "| renderer | anti-aliasing | ms per frame | diff mean | diff p99 |");
+    let _ = writeln!(
+        s,
+        "| renderer | anti-aliasing | ms per frame | diff mean | diff p99 |"
+    );
     let _ = writeln!(s, "|---|---|---:|---:|---:|");
     let reference = render_cpu(&scene, &opts(4)).expect("render");
     let mut cpu2 = None;
@@ -172,9 +175,13 @@ pub fn section(root: &Path, repeat: usize) -> String {
             });
             let (gpu_ms, mism, dd) = match (gpu, raster.as_mut()) {
                 (Some(ctx), Some(r)) => {
-                    let mut g = r.depth_map(ctx, mesh, &cam, 512, 512, &ro).expect("gpu depth");
+                    let mut g = r
+                        .depth_map(ctx, mesh, &cam, 512, 512, &ro)
+                        .expect("gpu depth");
                     let ms = median_ms(repeat.min(7), || {
-                        g = r.depth_map(ctx, mesh, &cam, 512, 512, &ro).expect("gpu depth")
+                        g = r
+                            .depth_map(ctx, mesh, &cam, 512, 512, &ro)
+                            .expect("gpu depth")
                     });
                     let (m, d) = depth_diff(&g, &map);
                     (format!("{ms:.2}"), m.to_string(), format!("{d:.2e}"))

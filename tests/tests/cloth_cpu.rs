@@ -5,51 +5,17 @@
 //! through, and says so (with the fix) when it blows up. Each runs in well under a second in
 //! release.
 
-use glam::{Quat, UVec3, Vec3, Vec4};
-use imprint_core::{DistanceField, Error, GridSpec};
+use glam::{Quat, Vec3, Vec4};
+use imprint_core::{DistanceField, Error};
 use imprint_stages::cloth::{
     AnisotropyMap, ClothAssets, ClothParams, ClothSim, Material, Pin, Shape, StressOutcome,
     stress_map,
 };
 use imprint_tests::asset;
 
+use imprint_tests::cloth::{grid, harada, sim, sphere_field};
+
 const FPS: f32 = 60.0;
-
-/// An exact field of the sphere (c, r) on the box [lo, hi] with cells of `cell`.
-fn sphere_field(c: Vec3, r: f32, lo: Vec3, hi: Vec3, cell: f32, band: f32) -> DistanceField {
-    let dims = ((hi - lo) / cell).ceil().as_uvec3() + UVec3::ONE;
-    let spec = GridSpec::new(lo, cell, dims).unwrap();
-    DistanceField::from_closest_points(spec, band, |p| {
-        let d = p - c;
-        let l = d.length();
-        if l > 0.0 {
-            c + r * d / l
-        } else {
-            c + Vec3::new(r, 0.0, 0.0)
-        }
-    })
-}
-
-fn grid(size: [f32; 2], resolution: [u32; 2], center: Vec3, normal: Vec3) -> Shape {
-    Shape::Grid {
-        size,
-        resolution,
-        center,
-        normal,
-    }
-}
-
-fn harada(k: f32, shear: f32) -> Material {
-    Material::Harada {
-        k_structural: k,
-        k_shear: shear,
-        k_bend: None,
-    }
-}
-
-fn sim(params: &ClothParams) -> ClothSim {
-    ClothSim::from_assets(params, &ClothAssets::default()).unwrap()
-}
 
 /// Pseudo-random numbers in [-0.5, 0.5), reproducible.
 fn noise(i: usize, k: u64) -> f32 {

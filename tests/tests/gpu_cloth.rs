@@ -6,49 +6,15 @@
 //! (`IMPRINT_REQUIRE_GPU=1` makes that a failure). Small cloths: CI runs these on a software
 //! rasteriser (Mesa lavapipe).
 
-use glam::{UVec3, Vec3};
-use imprint_core::{DistanceField, Error, GridSpec};
+use glam::Vec3;
+use imprint_core::{DistanceField, Error};
 use imprint_gpu::test_context;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
-use imprint_stages::cloth::{ClothAssets, ClothParams, ClothSim, Material, Pin, Shape};
+use imprint_stages::cloth::{ClothParams, Material, Pin};
+
+use imprint_tests::cloth::{grid, harada, sim, sphere_field};
 
 const FPS: f32 = 60.0;
-
-/// An exact field of the sphere (c, r) on the box [lo, hi] with cells of `cell`.
-fn sphere_field(c: Vec3, r: f32, lo: Vec3, hi: Vec3, cell: f32, band: f32) -> DistanceField {
-    let dims = ((hi - lo) / cell).ceil().as_uvec3() + UVec3::ONE;
-    let spec = GridSpec::new(lo, cell, dims).unwrap();
-    DistanceField::from_closest_points(spec, band, |p| {
-        let d = p - c;
-        let l = d.length();
-        if l > 0.0 {
-            c + r * d / l
-        } else {
-            c + Vec3::new(r, 0.0, 0.0)
-        }
-    })
-}
-
-fn grid(size: [f32; 2], resolution: [u32; 2], center: Vec3, normal: Vec3) -> Shape {
-    Shape::Grid {
-        size,
-        resolution,
-        center,
-        normal,
-    }
-}
-
-fn harada(k: f32, shear: f32) -> Material {
-    Material::Harada {
-        k_structural: k,
-        k_shear: shear,
-        k_bend: None,
-    }
-}
-
-fn sim(params: &ClothParams) -> ClothSim {
-    ClothSim::from_assets(params, &ClothAssets::default()).unwrap()
-}
 
 /// A 16 x 16 cloth dropped from 0.15 above a sphere of radius 0.3, 16 substeps per frame.
 fn drop_params() -> ClothParams {

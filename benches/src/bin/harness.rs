@@ -24,8 +24,14 @@ use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
 const SECTIONS: [(&str, &str); 5] = [
-    ("field", "distance fields on the CPU: H Table 1 and triangle-count scaling"),
-    ("baselines", "the same fields through OpenVDB and Open3D, same run"),
+    (
+        "field",
+        "distance fields on the CPU: H Table 1 and triangle-count scaling",
+    ),
+    (
+        "baselines",
+        "the same fields through OpenVDB and Open3D, same run",
+    ),
     ("gpu", "the GPU voxelise + field path"),
     ("render", "frames and depth maps, CPU and GPU"),
     ("cloth", "the cloth against Taichi, and H's bunny scene"),

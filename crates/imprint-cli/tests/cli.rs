@@ -25,6 +25,23 @@ fn run_ok(args: &[&str], cwd: &Path) -> Output {
     out
 }
 
+/// `imprint run FILE --out OUT --backend gpu`, expecting success; false (the test skips)
+/// when there is no adapter, unless `IMPRINT_REQUIRE_GPU=1`, which makes that a failure.
+fn run_gpu_or_skip(file: &str, out: &str, cwd: &Path) -> bool {
+    let gpu = imprint(&["run", file, "--out", out, "--backend", "gpu"], cwd);
+    let err = String::from_utf8_lossy(&gpu.stderr);
+    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
+        assert!(
+            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "IMPRINT_REQUIRE_GPU=1 but: {err}"
+        );
+        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+        return false;
+    }
+    assert_eq!(gpu.status.code(), Some(0), "{err}");
+    true
+}
+
 fn assets() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/meshes"))
 }
@@ -347,20 +364,9 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
         &["run", f, "--out", "cpu", "--backend", "cpu"],
         c.dir.path(),
     );
-    let gpu = imprint(
-        &["run", f, "--out", "gpu", "--backend", "gpu"],
-        c.dir.path(),
-    );
-    let err = String::from_utf8_lossy(&gpu.stderr);
-    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
-        assert!(
-            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
-            "IMPRINT_REQUIRE_GPU=1 but: {err}"
-        );
-        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+    if !run_gpu_or_skip(f, "gpu", c.dir.path()) {
         return;
     }
-    assert_eq!(gpu.status.code(), Some(0), "{err}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
             .unwrap();
@@ -661,20 +667,9 @@ fn gpu_cloth_agrees_with_cpu_through_the_pipeline() {
         &["run", f, "--out", "cpu", "--backend", "cpu"],
         c.dir.path(),
     );
-    let gpu = imprint(
-        &["run", f, "--out", "gpu", "--backend", "gpu"],
-        c.dir.path(),
-    );
-    let err = String::from_utf8_lossy(&gpu.stderr);
-    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
-        assert!(
-            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
-            "IMPRINT_REQUIRE_GPU=1 but: {err}"
-        );
-        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+    if !run_gpu_or_skip(f, "gpu", c.dir.path()) {
         return;
     }
-    assert_eq!(gpu.status.code(), Some(0), "{err}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
             .unwrap();

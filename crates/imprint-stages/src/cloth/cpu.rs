@@ -507,7 +507,9 @@ impl ClothSim {
                 self.state.prev.clone_from(&self.backup.prev);
                 self.side.clone_from(&self.backup_side);
                 self.dt_prev = backup_dt;
-                return Err(self.numerical(frame, j, n_sub, dt, dt_frame, what));
+                return Err(self
+                    .stability
+                    .blow_up(&self.node, "cloth", frame, j, n_sub, dt, dt_frame, &what));
             }
             // Counts add up over a substep's chunks; over the frame's substeps, `inside` is
             // the largest (particles, not particle-substeps).
@@ -542,43 +544,6 @@ impl ClothSim {
             ));
         }
         Ok(())
-    }
-
-    fn numerical(
-        &self,
-        frame: u32,
-        j: u32,
-        n_sub: u32,
-        dt: f32,
-        dt_frame: f32,
-        what: String,
-    ) -> Error {
-        let est = &self.stability;
-        let needed = est.substeps_for(dt_frame);
-        let hint = if needed > n_sub {
-            format!(
-                "substeps: {needed} (now {n_sub}; the stiffest spring is stable for dt up to \
-                 {:.3e} s, this substep is {dt:.3e} s), or divide the material's stiffness by {:.0}",
-                est.dt_crit,
-                ((dt / (stability::SAFETY * est.dt_crit)).powi(2))
-                    .ceil()
-                    .max(2.0)
-            )
-        } else {
-            format!(
-                "substeps: {} (now {n_sub}; the springs alone are within their stable step \
-                 {:.3e} s, so contact, wind or pin motion moved particles too far per substep), \
-                 or lower the colliders' or pins' speed",
-                (2 * n_sub).max(needed),
-                est.dt_crit
-            )
-        };
-        Error::Numerical {
-            node: self.node.clone(),
-            frame,
-            message: format!("cloth exploded at substep {} of {n_sub}: {what}", j + 1),
-            hint,
-        }
     }
 
     /// One substep: every particle's next position, then the buffers rotate.

@@ -35,7 +35,7 @@ use super::cpu::{ClothSim, ClothState};
 use super::params::{ClothParams, Material};
 use super::shape::ClothShape;
 use super::springs::{Faces, LinkQuad, SpringLaw};
-use super::stability::{self, StabilityEstimate};
+use super::stability::StabilityEstimate;
 use glam::{Vec3, Vec4};
 use imprint_core::{DistanceField, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
@@ -634,7 +634,16 @@ impl GpuCloth {
             encoder.copy_buffer_to_buffer(&self.side_backup, 0, &self.side, 0, self.side.size());
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
-            return Err(self.numerical(frame, j, n_sub, dt, dt_frame, what));
+            return Err(self.stability.blow_up(
+                &self.node,
+                "cloth (GPU)",
+                frame,
+                j,
+                n_sub,
+                dt,
+                dt_frame,
+                &what,
+            ));
         }
         self.cur = cur;
         self.dt_prev = dt_prev;
@@ -668,46 +677,5 @@ impl GpuCloth {
                 + wind2 as f64
                 + (scale / dt_frame as f64).powi(2));
         p.limits.energy_growth as f64 * self.ke_last.max(energy_scale)
-    }
-
-    /// The CPU's error for a blown-up frame (`ClothSim::numerical`).
-    fn numerical(
-        &self,
-        frame: u32,
-        j: u32,
-        n_sub: u32,
-        dt: f32,
-        dt_frame: f32,
-        what: String,
-    ) -> Error {
-        let est = &self.stability;
-        let needed = est.substeps_for(dt_frame);
-        let hint = if needed > n_sub {
-            format!(
-                "substeps: {needed} (now {n_sub}; the stiffest spring is stable for dt up to \
-                 {:.3e} s, this substep is {dt:.3e} s), or divide the material's stiffness by {:.0}",
-                est.dt_crit,
-                ((dt / (stability::SAFETY * est.dt_crit)).powi(2))
-                    .ceil()
-                    .max(2.0)
-            )
-        } else {
-            format!(
-                "substeps: {} (now {n_sub}; the springs alone are within their stable step \
-                 {:.3e} s, so contact, wind or pin motion moved particles too far per substep), \
-                 or lower the colliders' or pins' speed",
-                (2 * n_sub).max(needed),
-                est.dt_crit
-            )
-        };
-        Error::Numerical {
-            node: self.node.clone(),
-            frame,
-            message: format!(
-                "cloth (GPU) exploded by substep {} of {n_sub}: {what}",
-                j + 1
-            ),
-            hint,
-        }
     }
 }

@@ -46,6 +46,48 @@ pub struct StabilityEstimate {
 }
 
 impl StabilityEstimate {
+    /// The error of a blown-up frame, for both paths: `what` failed at substep `j` (from 0)
+    /// of `n_sub` substeps of `dt` in a frame of `dt_frame`; the hint names the substep count
+    /// (or the stiffness division) that the estimate says would hold, or, when the springs
+    /// alone are within their stable step, blames contact, wind or pins and doubles the
+    /// substeps.
+    #[allow(clippy::too_many_arguments)]
+    pub fn blow_up(
+        &self,
+        node: &str,
+        path: &str,
+        frame: u32,
+        j: u32,
+        n_sub: u32,
+        dt: f32,
+        dt_frame: f32,
+        what: &str,
+    ) -> Error {
+        let needed = self.substeps_for(dt_frame);
+        let hint = if needed > n_sub {
+            format!(
+                "substeps: {needed} (now {n_sub}; the stiffest spring is stable for dt up to \
+                 {:.3e} s, this substep is {dt:.3e} s), or divide the material's stiffness by {:.0}",
+                self.dt_crit,
+                ((dt / (SAFETY * self.dt_crit)).powi(2)).ceil().max(2.0)
+            )
+        } else {
+            format!(
+                "substeps: {} (now {n_sub}; the springs alone are within their stable step \
+                 {:.3e} s, so contact, wind or pin motion moved particles too far per substep), \
+                 or lower the colliders' or pins' speed",
+                (2 * n_sub).max(needed),
+                self.dt_crit
+            )
+        };
+        Error::Numerical {
+            node: node.to_string(),
+            frame,
+            message: format!("{path} exploded at substep {} of {n_sub}: {what}", j + 1),
+            hint,
+        }
+    }
+
     /// Substeps a frame of `dt_frame` needs to stay at or below `SAFETY * dt_crit`.
     pub fn substeps_for(&self, dt_frame: f32) -> u32 {
         if !(self.dt_crit.is_finite() && self.dt_crit > 0.0) {
