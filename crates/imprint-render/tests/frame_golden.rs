@@ -13,11 +13,13 @@
 
 use image::{Rgb, RgbImage};
 use imprint_core::Mesh;
-use imprint_core::glam::{Mat4, Vec3};
-use imprint_core::mesh::primitives::{torus, uv_sphere};
-use imprint_render::frame::{GroundGrid, Lights, Object, RenderOptions, Scene, orbit, render_cpu};
+use imprint_core::glam::Vec3;
+use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, render_cpu};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+mod common;
+use common::sphere_torus_scene;
 
 fn crate_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -73,35 +75,6 @@ fn check_golden(name: &str, actual: &RgbImage) {
             pa.display(),
             pd.display()
         );
-    }
-}
-
-/// A sphere resting on the ground at the left, a torus standing at the right, a ground grid,
-/// the sun from the upper left front.
-fn sphere_torus_scene() -> Scene {
-    let mut sphere = uv_sphere(0.5, 32, 16);
-    sphere.transform(Mat4::from_translation(Vec3::new(-0.6, 0.5, 0.0)));
-    let mut ring = torus(0.45, 0.15, 20, 8);
-    ring.transform(
-        Mat4::from_translation(Vec3::new(0.7, 0.6, 0.0))
-            * Mat4::from_rotation_x(90f32.to_radians()),
-    );
-    Scene {
-        objects: vec![
-            Object::mesh(sphere, [0.8, 0.25, 0.2]),
-            Object::mesh(ring, [0.2, 0.45, 0.8]).with_wireframe(true),
-        ],
-        lights: Lights {
-            sun_direction: Vec3::new(-0.6, 1.0, 0.5),
-            sun: 0.8,
-            ambient: 0.2,
-        },
-        background: [235, 238, 242],
-        ground_grid: Some(GroundGrid {
-            spacing: 0.5,
-            half_extent: 3.0,
-            color: [120, 120, 120],
-        }),
     }
 }
 

@@ -432,33 +432,16 @@ impl GpuCloth {
         dt_frame: f32,
         mut timer: Option<&mut GpuTimer>,
     ) -> Result<GpuClothFrameMetrics> {
-        if !(dt_frame.is_finite() && dt_frame > 0.0) {
-            return Err(Error::Invalid(format!(
-                "cloth: frame duration {dt_frame} must be a positive finite number"
-            )));
-        }
-        let blend = self.params.blend_fields && !fields_start.is_empty();
-        if blend && fields_start.len() != fields_end.len() {
-            return Err(Error::Invalid(format!(
-                "cloth: {} start fields for {} end fields; pass one per collider, or none",
-                fields_start.len(),
-                fields_end.len()
-            )));
-        }
-        let eps = self.params.collision.epsilon;
+        let blend = self
+            .params
+            .frame_blend(dt_frame, fields_start.len(), fields_end.len())?;
         for f in fields_end
             .iter()
             .chain(if blend { fields_start } else { &[] })
         {
-            if eps >= f.far_value() {
-                return Err(Error::Invalid(format!(
-                    "cloth: collision.epsilon {eps} is not inside the collider field's band \
-                     ({} = {} cells); widen the field's band or lower epsilon",
-                    f.far_value(),
-                    f.band
-                )));
-            }
+            self.params.check_band(f.far_value(), f.band)?;
         }
+        let eps = self.params.collision.epsilon;
         let nf = fields_end.len();
         let n = self.len();
         let mut encoder = ctx

@@ -256,6 +256,36 @@ pub const MAX_SUBSTEPS: u32 = 100_000;
 pub const MAX_PARTICLES: u64 = 1 << 22;
 
 impl ClothParams {
+    /// Checks one frame's inputs, for both simulator paths: a positive frame duration, and
+    /// start fields matching the end fields when they are blended. Returns whether they are.
+    pub fn frame_blend(&self, dt_frame: f32, n_start: usize, n_end: usize) -> Result<bool> {
+        if !(dt_frame.is_finite() && dt_frame > 0.0) {
+            return Err(Error::Invalid(format!(
+                "cloth: frame duration {dt_frame} must be a positive finite number"
+            )));
+        }
+        let blend = self.blend_fields && n_start > 0;
+        if blend && n_start != n_end {
+            return Err(Error::Invalid(format!(
+                "cloth: {n_start} start fields for {n_end} end fields; pass one per collider, or none"
+            )));
+        }
+        Ok(blend)
+    }
+
+    /// A collider field (its far value in world units, its band in cells) must reach
+    /// beyond ε, or contact would never be seen.
+    pub fn check_band(&self, far_value: f32, band: f32) -> Result<()> {
+        let eps = self.collision.epsilon;
+        if eps >= far_value {
+            return Err(Error::Invalid(format!(
+                "cloth: collision.epsilon {eps} is not inside the collider field's band \
+                 ({far_value} = {band} cells); widen the field's band or lower epsilon"
+            )));
+        }
+        Ok(())
+    }
+
     /// A params value with defaults for everything but the shape and the material.
     pub fn new(shape: Shape, material: Material) -> Self {
         ClothParams {
