@@ -1,11 +1,12 @@
 // One cloth substep (H eq. 9-12, METHODS §3), the GPU twin of imprint_stages::cloth::cpu:
 // one invocation per particle gathers its spring forces from `pos` (CSR over LinkQuads, four
-// springs per 64-byte struct), integrates damped position Verlet from `pos` and `prev` into
-// `next` (pins: their target, moving linearly over the frame), then pushes its own new
-// position out of each collider in order and off the ground. Nothing reads another
-// particle's `next`, so forces, integration and contact are one dispatch per substep; the
-// host rotates the three position buffers between substeps. No atomics: every particle
-// writes only its own `next`, `side` and `stats` slots.
+// springs per 64-byte struct) and its hinges' bending forces (T eq. 2, CSR over hinge refs),
+// integrates damped position Verlet from `pos` and `prev` into `next` (pins: their target,
+// moving linearly over the frame), then pushes its own new position out of each collider in
+// order and off the ground. Nothing reads another particle's `next`, so forces, integration
+// and contact are one dispatch per substep; the host rotates the three position buffers
+// between substeps. No atomics: every particle writes only its own `next`, `side` and
+// `stats` slots.
 // Prepended: common/dispatch.wgsl.
 //
 // Fields are sampled as imprint_stages::cloth::sampler does (trilinear, the field's weight
@@ -40,6 +41,22 @@ struct StepParams {
     // Where the face and pin-slot lists start in `topo`.
     face_base: u32,
     pin_base: u32,
+    // Where the hinge offsets (n + 1) and the hinge refs (hinge * 4 + role) start in `topo`.
+    hinge_base: u32,
+    href_base: u32,
+    // 0: no hinges (`hinges` is a dummy), skip them.
+    has_hinges: u32,
+    _pad: u32,
+}
+
+// imprint_stages::cloth::springs::Hinge: the edge (v0, v1) shared by the triangles (v0, v1, v2)
+// and (v1, v0, v3).
+struct Hinge {
+    v: vec4<u32>,
+    rest_angle: f32,
+    c: f32,
+    _pad0: f32,
+    _pad1: f32,
 }
 
 struct LinkQuad {
@@ -84,7 +101,8 @@ const TINY: f32 = 1e-20;
 const F32_MAX: f32 = 3.40282347e38;
 
 @group(0) @binding(0) var<uniform> params: StepParams;
-// Link offsets (n + 1), face offsets (n + 1), pin slots (n; NONE when free).
+// Link offsets (n + 1), face offsets (n + 1), pin slots (n; NONE when free), hinge offsets
+// (n + 1), hinge refs.
 @group(0) @binding(1) var<storage, read> topo: array<u32>;
 @group(0) @binding(2) var<storage, read> quads: array<LinkQuad>;
 // Per pinned particle: its position at the frame's start, then its target at the end.
@@ -99,6 +117,7 @@ const F32_MAX: f32 = 3.40282347e38;
 @group(0) @binding(9) var<storage, read_write> stats: array<Stats>;
 @group(0) @binding(10) var<storage, read> headers: array<FieldHeader>;
 @group(0) @binding(11) var<storage, read> cells: array<vec4<f32>>;
+@group(0) @binding(12) var<storage, read> hinges: array<Hinge>;
 
 fn finite3(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3<f32>(F32_MAX));
@@ -235,6 +254,116 @@ fn signed_sample(k: u32, x: vec3<f32>, x_from: vec3<f32>, side_k: vec4<f32>) -> 
     return classify(f, side_k, reach0, false);
 }
 
+// Rust's f32::signum (1 for +0, -1 for -0; WGSL's sign gives 0 at zero).
+fn signum(x: f32) -> f32 {
+    return select(1.0, -1.0, bitcast<u32>(x) >= 0x80000000u);
+}
+
+// atan2(y, x) to within a few ulps of Rust's f32::atan2 (Cephes' atanf polynomial after
+// reduction to [0, tan(pi/8)]). WGSL leaves the builtin's precision to the device (Vulkan
+// allows 4096 ulps; Mesa lavapipe's is off by up to ~350 ulps), and the hinge angle feeds
+// every bending force. Signs of zero as Rust: y = -0 gives -0 (x > 0) or -pi (x < 0).
+fn atan2_f32(y: f32, x: f32) -> f32 {
+    let ax = abs(x);
+    let ay = abs(y);
+    let hi = max(ax, ay);
+    var a = 0.0;
+    if hi > 0.0 {
+        var t = min(ax, ay) / hi;
+        var base = 0.0;
+        if t > 0.41421356 {
+            base = 0.78539816;
+            t = (t - 1.0) / (t + 1.0);
+        }
+        let z = t * t;
+        a = base + ((((0.0805374449538 * z - 0.138776856032) * z + 0.199777106478) * z
+            - 0.333329491539) * z * t + t);
+        if ay > ax {
+            a = 1.5707963 - a;
+        }
+    }
+    if bitcast<u32>(x) >= 0x80000000u {
+        a = 3.1415927 - a;
+    }
+    return select(a, -a, bitcast<u32>(y) >= 0x80000000u);
+}
+
+// springs::hinge_slope: c (1 - cos φ) sign(φ).
+fn hinge_slope(c: f32, phi: f32) -> f32 {
+    return c * (1.0 - cos(phi)) * signum(phi);
+}
+
+// springs::hinge_angle_gradient for the hinge at x0..x3, its angle θ and dθ/dx of the vertex
+// in slot `role`; ok = false (no force) when a triangle is degenerate.
+struct HingeGrad {
+    ok: bool,
+    theta: f32,
+    g: vec3<f32>,
+}
+
+fn hinge_angle_gradient(
+    x0: vec3<f32>,
+    x1: vec3<f32>,
+    x2: vec3<f32>,
+    x3: vec3<f32>,
+    role: u32,
+) -> HingeGrad {
+    let e = x1 - x0;
+    let n1 = cross(e, x2 - x0);
+    let n2 = cross(x0 - x1, x3 - x1);
+    let l1 = dot(n1, n1);
+    let l2 = dot(n2, n2);
+    let le2 = dot(e, e);
+    if !(l1 > 1e-12 * le2 * le2 && l2 > 1e-12 * le2 * le2 && le2 > 0.0) {
+        return HingeGrad(false, 0.0, vec3<f32>(0.0));
+    }
+    let le = sqrt(le2);
+    let eh = e / le;
+    let m1 = n1 / l1;
+    let m2 = n2 / l2;
+    let sin_t = dot(cross(n1, n2), eh) / sqrt(l1 * l2);
+    let cos_t = dot(n1, n2) / sqrt(l1 * l2);
+    let theta = atan2_f32(sin_t, cos_t);
+    // Bridson et al. 2003's bending modes, as on the CPU; only this vertex's.
+    var g: vec3<f32>;
+    switch role {
+        case 0u: {
+            g = -(dot(x2 - x1, eh) * m1 + dot(x3 - x1, eh) * m2);
+        }
+        case 1u: {
+            g = dot(x2 - x0, eh) * m1 + dot(x3 - x0, eh) * m2;
+        }
+        case 2u: {
+            g = -le * m1;
+        }
+        default: {
+            g = -le * m2;
+        }
+    }
+    return HingeGrad(true, theta, g);
+}
+
+// cpu::hinge_force: the sum over particle i's hinges of -U'(θ - θ_rest) dθ/dx_i.
+fn hinge_force(i: u32) -> vec3<f32> {
+    var f = vec3<f32>(0.0);
+    let base = params.hinge_base;
+    for (var r = topo[base + i]; r < topo[base + i + 1u]; r++) {
+        let ref_ = topo[params.href_base + r];
+        let h = hinges[ref_ / 4u];
+        let hg = hinge_angle_gradient(
+            pos[h.v.x].xyz,
+            pos[h.v.y].xyz,
+            pos[h.v.z].xyz,
+            pos[h.v.w].xyz,
+            ref_ % 4u,
+        );
+        if hg.ok {
+            f -= hinge_slope(h.c, hg.theta - h.rest_angle) * hg.g;
+        }
+    }
+    return f;
+}
+
 // Faces::area_normal at `pos`.
 fn area_normal(i: u32) -> vec3<f32> {
     let xi = pos[i].xyz;
@@ -302,6 +431,9 @@ fn substep(
         st.contacts = 0u;
         stats[i] = st;
         return;
+    }
+    if params.has_hinges == 1u {
+        f += hinge_force(i);
     }
     // H eq. 10.
     let dt = params.dt;

@@ -1,8 +1,8 @@
 //! The GPU cloth against the CPU reference: the same positions (to f32 rounding, which the
 //! shader compiler's ordering and fused multiply-adds change) over the first frames of a drop
-//! onto a sphere, with a resting and with a moving (time-blended) collider; the same rest
-//! invariants after many frames; pins exact to the bit; unsupported parameters and blow-ups
-//! refused with clear errors. Every test skips, with a note, without a GPU adapter
+//! onto a sphere, with a resting and with a moving (time-blended) collider, and with Tokoi's
+//! springs and bending hinges; the same rest invariants after many frames; pins exact to the
+//! bit; blow-ups refused with clear errors. Every test skips, with a note, without a GPU adapter
 //! (`IMPRINT_REQUIRE_GPU=1` makes that a failure). Small cloths: CI runs these on a software
 //! rasteriser (Mesa lavapipe).
 
@@ -197,33 +197,19 @@ fn pins_hold_bit_for_bit_and_follow_their_targets() {
     assert!(gpu.set_pin_targets(&targets[1..]).is_err());
 }
 
+/// Tokoi's quadratic springs without bending: the same positions as the CPU.
 #[test]
-fn unsupported_params_are_refused_clearly() {
+fn tokoi_springs_match_the_cpu() {
     let Some(ctx) = test_context() else { return };
-    let p = ClothParams::new(
+    let mut p = ClothParams::new(
         grid([0.5, 0.5], [6, 6], Vec3::ZERO, Vec3::Y),
         Material::Tokoi {
             a_compress: 100.0,
             b_stretch: 1000.0,
-            bend_c: 0.01,
+            bend_c: 0.0,
             anisotropy: None,
         },
     );
-    match GpuCloth::new(ctx, &sim(&p)) {
-        Err(Error::Invalid(msg)) => {
-            assert!(msg.contains("bend_c") && msg.contains("GPU"), "{msg}")
-        }
-        Err(e) => panic!("wrong error: {e}"),
-        Ok(_) => panic!("Tokoi bending must be refused on the GPU"),
-    }
-    // Without bending, Tokoi's quadratic springs run, and match the CPU.
-    let mut p = p;
-    p.material = Material::Tokoi {
-        a_compress: 100.0,
-        b_stretch: 1000.0,
-        bend_c: 0.0,
-        anisotropy: None,
-    };
     p.pins = vec![Pin::TopEdge];
     let mut cpu = sim(&p);
     let mut gpu = GpuCloth::new(ctx, &cpu).unwrap();
@@ -233,6 +219,136 @@ fn unsupported_params_are_refused_clearly() {
     }
     let d = max_diff(&cpu.positions(), &gpu.read_positions(ctx).unwrap());
     assert!(d <= FEW_FRAMES_TOL, "Tokoi springs differ by {d}");
+}
+
+/// Tokoi's material with hinge bending: a 16 x 16 cloth held horizontally by one edge.
+fn tokoi_hinge_params(bend_c: f32) -> ClothParams {
+    let mut p = ClothParams::new(
+        grid([0.6, 0.6], [16, 16], Vec3::new(0.0, 1.0, 0.0), Vec3::Y),
+        Material::Tokoi {
+            a_compress: 100.0,
+            b_stretch: 1000.0,
+            bend_c,
+            anisotropy: None,
+        },
+    );
+    p.pins = vec![Pin::TopEdge];
+    p.substeps = 16;
+    p
+}
+
+/// Hinge constant of the hanging cloth: enough to move it by centimetres (1.4e-2 m after 60
+/// frames against `bend_c = 0`, on both paths).
+const BEND_C: f32 = 2e-3;
+/// Hinge constant of the folded cloth: opens the fold by a quarter in a third of a second.
+const FOLD_C: f32 = 1e-2;
+
+/// The hanging cloth with bending swings down from its pinned edge, bent sharply along it, for
+/// one second: the same positions as the CPU. Measured on Mesa lavapipe: bit-identical
+/// through the first frame, then differences from the first bending forces (the GPU's `cos`
+/// and the shader's `atan2` differ from Rust's in the last bits) growing to at most 2.1e-5 m
+/// over the 60 frames; with bending off the same swing crumples and its difference grows to
+/// 5.7e-4 m, so bending smooths it. The tolerance is the springs' (`FEW_FRAMES_TOL`), about
+/// five times the measured worst.
+#[test]
+fn tokoi_hinge_bending_matches_the_cpu() {
+    let Some(ctx) = test_context() else { return };
+    let p = tokoi_hinge_params(BEND_C);
+    let mut cpu = sim(&p);
+    assert!(
+        cpu.hinges().hinges.len() > 600,
+        "{}",
+        cpu.hinges().hinges.len()
+    );
+    let mut gpu = GpuCloth::new(ctx, &cpu).unwrap();
+    let mut worst = 0.0f32;
+    for f in 0..60 {
+        cpu.step_frame(&[], &[], f, 1.0 / FPS).unwrap();
+        gpu.step_frame(ctx, &[], &[], f, 1.0 / FPS).unwrap();
+        let d = max_diff(&cpu.positions(), &gpu.read_positions(ctx).unwrap());
+        worst = worst.max(d);
+    }
+    eprintln!("Tokoi with hinges, 60 frames: worst max |x_gpu - x_cpu| = {worst:.3e} m");
+    assert!(
+        worst <= FEW_FRAMES_TOL,
+        "hinge bending differs by {worst} m"
+    );
+}
+
+/// A free cloth without gravity, folded by 90 degrees along a grid line: every spring keeps
+/// its rest length, so only the hinges can move it. With bending it unfolds on the GPU as on
+/// the CPU; with `bend_c = 0` it stays folded on both, so a GPU path that dropped the hinges
+/// fails here. Measured on Mesa lavapipe over the 20 frames: the fold opens from 90 to 71.9
+/// degrees (the hinges at the crease flatten within a few frames and the bend spreads into
+/// both halves), GPU and CPU angles within 6.8e-3 degrees, positions within 3.1e-5 m (the
+/// stiff hinges ring, which amplifies rounding faster than the swing above: 6.7e-5 m by
+/// frame 30, 1.3e-4 m by frame 50, so the comparison stops at 20 frames). Without bending
+/// both stay at 90 degrees, bit-identical. Tolerances: `FEW_FRAMES_TOL` for positions, and
+/// 0.05 degrees for the angle (that tolerance over the 0.3 m halves).
+#[test]
+fn a_folded_cloth_unfolds_by_bending_as_on_the_cpu() {
+    let Some(ctx) = test_context() else { return };
+    let (nx, ny) = (16u32, 16u32);
+    let id = |i: u32, j: u32| (i + nx * j) as usize;
+    let fold_row = 8;
+    // Angle at the crease between the two halves' middle columns, degrees (0 = flat).
+    let fold_angle = |x: &[Vec3]| {
+        let m = nx / 2;
+        let line = x[id(m, fold_row)];
+        (line - x[id(m, 0)])
+            .angle_between(x[id(m, ny - 1)] - line)
+            .to_degrees()
+    };
+    let run = |bend_c: f32| {
+        let mut p = tokoi_hinge_params(bend_c);
+        p.pins = Vec::new();
+        p.gravity = Vec3::ZERO;
+        let mut cpu = sim(&p);
+        let rest = cpu.positions();
+        let o = rest[id(0, fold_row)];
+        let axis = (rest[id(1, fold_row)] - o).normalize();
+        let turn = glam::Quat::from_axis_angle(axis, std::f32::consts::FRAC_PI_2);
+        let folded: Vec<Vec3> = rest
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| {
+                if k > id(nx - 1, fold_row) {
+                    o + turn * (x - o)
+                } else {
+                    x
+                }
+            })
+            .collect();
+        assert!((fold_angle(&folded) - 90.0).abs() < 1e-3);
+        cpu.set_positions(&folded).unwrap();
+        let mut gpu = GpuCloth::new(ctx, &cpu).unwrap();
+        let mut worst = 0.0f32;
+        for f in 0..20 {
+            cpu.step_frame(&[], &[], f, 1.0 / FPS).unwrap();
+            gpu.step_frame(ctx, &[], &[], f, 1.0 / FPS).unwrap();
+            let d = max_diff(&cpu.positions(), &gpu.read_positions(ctx).unwrap());
+            worst = worst.max(d);
+        }
+        let x = gpu.read_positions(ctx).unwrap();
+        (fold_angle(&cpu.positions()), fold_angle(&x), worst)
+    };
+    let (cpu_bent, gpu_bent, worst) = run(FOLD_C);
+    let (cpu_flat, gpu_flat, worst_flat) = run(0.0);
+    eprintln!(
+        "fold after 20 frames: bend_c = {FOLD_C}: CPU {cpu_bent:.4} deg, GPU {gpu_bent:.4} \
+         deg, worst max |x_gpu - x_cpu| {worst:.3e} m; bend_c = 0: CPU {cpu_flat:.4} deg, GPU \
+         {gpu_flat:.4} deg, worst {worst_flat:.3e} m"
+    );
+    assert!(
+        (gpu_flat - 90.0).abs() < 1e-2 && (cpu_flat - 90.0).abs() < 1e-2,
+        "without bending the fold must stay: CPU {cpu_flat}, GPU {gpu_flat}"
+    );
+    assert!(gpu_bent < 80.0, "the GPU fold did not open: {gpu_bent} deg");
+    assert!(
+        (gpu_bent - cpu_bent).abs() < 0.05,
+        "fold angles differ: GPU {gpu_bent}, CPU {cpu_bent}"
+    );
+    assert!(worst <= FEW_FRAMES_TOL, "folded cloth differs by {worst} m");
 }
 
 /// As the CPU's test: 10^7 N/m, one substep. The GPU fails with `Error::Numerical` naming

@@ -853,7 +853,7 @@ fn build_stages(
                 let gpu_cloth = if choose_gpu(want, name, gpu)? {
                     match GpuCloth::new(gpu.expect("chosen"), &sim) {
                         Ok(g) => Some(Box::new(g.with_name(name.clone()))),
-                        // Auto falls back to the CPU for what the GPU path does not model.
+                        // Auto falls back to the CPU when the GPU cannot take this cloth (limits).
                         Err(e) if want == Backend::Auto => {
                             eprintln!("note: node '{name}' runs on the CPU: {e}");
                             None

@@ -1,12 +1,13 @@
 //! The GPU cloth (`shaders/cloth/step.wgsl`): the same model as [`super::cpu`], one compute
 //! dispatch per substep.
 //!
-//! [`GpuCloth::new`] takes a [`ClothSim`] and uploads its CSR links, faces, pins and state.
-//! Each substep is one invocation per particle that gathers its springs from the current
-//! positions, integrates damped Verlet into the next buffer, then projects its own new
-//! position out of each collider in order and off the ground (contact reads no other
-//! particle's new position, so it needs no second dispatch). The three position buffers
-//! rotate between substeps; nothing is read back between substeps, and nothing uses atomics.
+//! [`GpuCloth::new`] takes a [`ClothSim`] and uploads its CSR links, hinges, faces, pins and
+//! state. Each substep is one invocation per particle that gathers its springs and Tokoi's
+//! bending hinges from the current positions, integrates damped Verlet into the next buffer,
+//! then projects its own new position out of each collider in order and off the ground
+//! (contact reads no other particle's new position, so it needs no second dispatch). The
+//! three position buffers rotate between substeps; nothing is read back between substeps, and
+//! nothing uses atomics.
 //!
 //! Colliders are [`GpuCollider`]s: a [`DistanceField`]'s cells uploaded in the sampler's cache
 //! layout (`vec4`: closest-point vector, distance negated for far cells), sampled with the
@@ -22,20 +23,24 @@
 //! cloth back where it was at the frame's start and returns `Error::Numerical` naming the
 //! node, the frame, the substep and what to change.
 //!
-//! Not supported (refused by [`GpuCloth::new`] with `Error::Invalid`): Tokoi's bending hinges
-//! (`bend_c > 0`). Everything else is: Harada and Tokoi springs (anisotropy is baked into the
-//! spring constants), gravity, damping, pins with moving targets, wind, ground, colliders with
-//! friction and time blending.
+//! Every parameter of the CPU cloth is supported: Harada and Tokoi springs (anisotropy is
+//! baked into the spring constants), Tokoi's bending hinges (`bend_c > 0`: the hinges are
+//! uploaded as built by [`super::springs::Hinges`], and the shader ports
+//! [`super::springs::hinge_angle_gradient`] and [`super::springs::hinge_slope`]), gravity,
+//! damping, pins with moving targets, wind, ground, colliders with friction and time blending.
 //!
 //! f32 arithmetic is the CPU's in the same order, but a shader compiler may fuse multiply-adds
-//! or divide less exactly, so positions agree to rounding at first and drift apart slowly;
-//! `tests/tests/gpu_cloth.rs` states the measured differences.
+//! or divide less exactly, and the hinges' `atan2` is a polynomial in the shader (within a few
+//! ulps of Rust's) and their `cos` the device's (WGSL leaves its precision to the device;
+//! within an ulp of Rust's on lavapipe), so positions agree to rounding at first and drift
+//! apart slowly; `tests/tests/gpu_cloth.rs` states the measured differences.
 
 use super::cpu::{ClothSim, ClothState};
-use super::params::{ClothParams, Material};
+use super::params::ClothParams;
 use super::shape::ClothShape;
-use super::springs::{Faces, LinkQuad, SpringLaw};
+use super::springs::{Faces, Hinge, LinkQuad, SpringLaw};
 use super::stability::StabilityEstimate;
+use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
 use imprint_core::{DistanceField, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
@@ -125,7 +130,14 @@ struct StepParams {
     substep: u32,
     face_base: u32,
     pin_base: u32,
+    hinge_base: u32,
+    href_base: u32,
+    has_hinges: u32,
+    _pad: u32,
 }
+
+// `Hinge` is bound as it is: `struct Hinge { v: vec4<u32>, rest_angle: f32, c: f32, ... }`.
+const _: () = assert!(std::mem::size_of::<Hinge>() == 32 && std::mem::align_of::<Hinge>() == 4);
 
 /// Mirrors `FieldHeader`.
 #[repr(C)]
@@ -174,8 +186,13 @@ pub struct GpuCloth {
     n: u32,
     face_base: u32,
     pin_base: u32,
+    hinge_base: u32,
+    href_base: u32,
+    has_hinges: bool,
     topo: wgpu::Buffer,
     quads: wgpu::Buffer,
+    /// [`Hinge`]s (one zeroed hinge when there are none; the shader then skips them).
+    hinges: wgpu::Buffer,
     face_others: wgpu::Buffer,
     /// Positions: `bufs[cur]` is current, `bufs[(cur + 2) % 3]` previous.
     bufs: [wgpu::Buffer; 3],
@@ -199,20 +216,6 @@ impl GpuCloth {
     /// [`GpuCloth::set_pin_targets`]); the side memory of the contacts starts empty.
     pub fn new(ctx: &GpuContext, sim: &ClothSim) -> Result<Self> {
         let params = sim.params().clone();
-        if let Material::Tokoi { bend_c, .. } = params.material
-            && bend_c > 0.0
-        {
-            return Err(Error::Invalid(format!(
-                "cloth (GPU): Tokoi bending (material.bend_c = {bend_c}) is not implemented on \
-                 the GPU; set bend_c to 0 or use backend: cpu"
-            )));
-        }
-        if !sim.hinges().hinges.is_empty() {
-            return Err(Error::Invalid(
-                "cloth (GPU): bending hinges are not implemented on the GPU; use backend: cpu"
-                    .into(),
-            ));
-        }
         let n = sim.len();
         let shape = sim.shape().clone();
         let faces = Faces::build(n, &shape.triangles);
@@ -222,12 +225,22 @@ impl GpuCloth {
         for (k, &p) in pinned.iter().enumerate() {
             pin_slot[p as usize] = k as u32;
         }
-        // Link offsets, face offsets, pin slots.
+        // Link offsets, face offsets, pin slots, hinge offsets, hinge refs.
+        let hinges = sim.hinges();
         let mut topo = links.offsets.clone();
         let face_base = topo.len() as u32;
         topo.extend_from_slice(&faces.offsets);
         let pin_base = topo.len() as u32;
         topo.extend_from_slice(&pin_slot);
+        let hinge_base = topo.len() as u32;
+        if hinges.is_empty() {
+            // Zero hinges per particle (the shader skips the loop anyway).
+            topo.resize(topo.len() + n + 1, 0);
+        } else {
+            topo.extend_from_slice(&hinges.offsets);
+        }
+        let href_base = topo.len() as u32;
+        topo.extend_from_slice(&hinges.refs);
         let state = sim.state();
         let pin_from: Vec<Vec3> = pinned
             .iter()
@@ -248,8 +261,17 @@ impl GpuCloth {
             n: n as u32,
             face_base,
             pin_base,
+            hinge_base,
+            href_base,
+            has_hinges: !hinges.is_empty(),
             topo: ctx.storage_buffer("cloth topology", &topo)?,
             quads: ctx.storage_buffer("cloth links", quads)?,
+            // A binding holds at least one whole struct: one zeroed hinge stands in for none.
+            hinges: if hinges.is_empty() {
+                ctx.storage_buffer("cloth hinges", &[Hinge::zeroed()])?
+            } else {
+                ctx.storage_buffer("cloth hinges", &hinges.hinges)?
+            },
             face_others: ctx.storage_buffer("cloth faces", &face_others)?,
             bufs,
             cur: 1,
@@ -523,6 +545,10 @@ impl GpuCloth {
                 substep: j,
                 face_base: self.face_base,
                 pin_base: self.pin_base,
+                hinge_base: self.hinge_base,
+                href_base: self.href_base,
+                has_hinges: self.has_hinges as u32,
+                _pad: 0,
             };
             let ub = &self.step_params[j as usize];
             ctx.queue.write_buffer(ub, 0, bytemuck::bytes_of(&sp));
@@ -549,6 +575,7 @@ impl GpuCloth {
                     (9, &self.stats),
                     (10, &fields.headers),
                     (11, &fields.cells),
+                    (12, &self.hinges),
                 ],
                 Dispatch::Threads(self.n),
                 timer.as_deref_mut(),
