@@ -41,6 +41,18 @@ pub mod cloth {
         })
     }
 
+    /// The sphere of the drop tests: radius 0.3 at the origin, 2 cm cells, band 4.
+    pub fn sphere_drop_field() -> DistanceField {
+        sphere_field(
+            Vec3::ZERO,
+            0.3,
+            Vec3::splat(-0.46),
+            Vec3::splat(0.46),
+            0.02,
+            4.0,
+        )
+    }
+
     /// A flat grid cloth.
     pub fn grid(size: [f32; 2], resolution: [u32; 2], center: Vec3, normal: Vec3) -> Shape {
         Shape::Grid {

@@ -13,7 +13,7 @@ use imprint_stages::cloth::{
 };
 use imprint_tests::asset;
 
-use imprint_tests::cloth::{grid, harada, sim, sphere_field};
+use imprint_tests::cloth::{grid, harada, sim, sphere_drop_field, sphere_field};
 
 const FPS: f32 = 60.0;
 
@@ -38,17 +38,6 @@ fn sphere_drop_params() -> ClothParams {
     p.collision.epsilon = 0.01;
     p.collision.friction = 0.5;
     p
-}
-
-fn sphere_drop_field() -> DistanceField {
-    sphere_field(
-        Vec3::ZERO,
-        0.3,
-        Vec3::splat(-0.46),
-        Vec3::splat(0.46),
-        0.02,
-        4.0,
-    )
 }
 
 #[test]

@@ -674,6 +674,24 @@ fn gpu_cloth_agrees_with_cpu_through_the_pipeline() {
         serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
             .unwrap();
     assert_eq!(report["nodes"]["cloth"]["backend"], "gpu");
+    // The GPU path reports the CPU's per-frame metrics, with the same keys and close values.
+    let cpu_report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(c.dir.path().join("cpu/report.json")).unwrap())
+            .unwrap();
+    let per_frame = |r: &serde_json::Value| r["nodes"]["cloth"]["metrics"]["per_frame"].clone();
+    let (g, cpu) = (per_frame(&report), per_frame(&cpu_report));
+    for (g, cpu) in g.as_array().unwrap().iter().zip(cpu.as_array().unwrap()) {
+        let keys =
+            |v: &serde_json::Value| v.as_object().unwrap().keys().cloned().collect::<Vec<_>>();
+        assert_eq!(keys(g), keys(cpu));
+        for k in ["max_strain", "kinetic", "energy_drift"] {
+            let (a, b) = (g[k].as_f64().unwrap(), cpu[k].as_f64().unwrap());
+            assert!(
+                (a - b).abs() <= 1e-3 * a.abs().max(b.abs()) + 1e-9,
+                "{k}: {a} vs {b}"
+            );
+        }
+    }
     // Frame 1: the cloth (3 cm above the ball's top) has reached it; both paths agree.
     let a = imprint_core::Mesh::load_obj(&c.dir.path().join("cpu/obj/cloth_0001.obj")).unwrap();
     let b = imprint_core::Mesh::load_obj(&c.dir.path().join("gpu/obj/cloth_0001.obj")).unwrap();

@@ -306,12 +306,18 @@ pub fn run(
                         let start: Vec<&GpuCollider> =
                             gpu_previous.iter().map(|(_, u)| &**u).collect();
                         let end_refs: Vec<&GpuCollider> = now.iter().map(|(_, u)| &**u).collect();
-                        let m = g.step_frame(ctx, &start, &end_refs, frame, dt)?;
+                        let gm = g.step_frame(ctx, &start, &end_refs, frame, dt)?;
                         *gpu_previous = now;
-                        (
-                            serde_json::to_value(m).expect("plain data"),
-                            g.to_mesh(ctx)?,
-                        )
+                        // The CPU simulator mirrors the GPU's state once per frame: the same
+                        // metrics as the CPU path, and the mesh from one read-back.
+                        let fields: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
+                        let m = sim.adopt_gpu_frame(
+                            g.read_state(ctx)?,
+                            g.read_side(ctx)?,
+                            &fields,
+                            &gm,
+                        )?;
+                        (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
                     } else {
                         let end_refs: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
                         let start_refs: Vec<&DistanceField> =

@@ -719,6 +719,56 @@ impl ClothSim {
         }
     }
 
+    /// Completes a GPU cloth's frame: takes the state it reached and its contacts' side
+    /// memory (read back once per frame) as this simulator's own, and adds to the GPU's
+    /// counts what the CPU measures after a frame (strain, particles left closer than ε to
+    /// `fields_end`, energies and their drift), so that both paths report the same
+    /// [`ClothFrameMetrics`]. The simulator then holds the GPU's state ([`ClothSim::to_mesh`]
+    /// gives the GPU cloth's mesh).
+    pub fn adopt_gpu_frame(
+        &mut self,
+        state: ClothState,
+        side: Vec<Vec4>,
+        fields_end: &[&DistanceField],
+        gpu: &super::gpu::GpuClothFrameMetrics,
+    ) -> Result<ClothFrameMetrics> {
+        let n = self.len();
+        let nf = fields_end.len();
+        if state.pos.len() != n || state.prev.len() != n || side.len() != n * nf.max(1) {
+            return Err(Error::Invalid(format!(
+                "cloth: a GPU state of {} particles and {} side entries for {n} particles and \
+                 {nf} colliders",
+                state.pos.len(),
+                side.len()
+            )));
+        }
+        self.state = state;
+        self.side = side;
+        self.side_fields = nf;
+        self.dt_prev = Some(gpu.dt_substep);
+        // Empty caches: every read takes the field itself (exact; once per frame).
+        let empty = FieldCache::default();
+        let colliders: Vec<Collider> = fields_end
+            .iter()
+            .map(|&f| Collider {
+                start: None,
+                end: CachedField {
+                    field: f,
+                    cache: &empty,
+                },
+            })
+            .collect();
+        let stats = SubstepStats {
+            contacts: gpu.contacts,
+            inside: gpu.inside,
+            max_depth: gpu.max_depth,
+            max_accel: gpu.max_accel,
+            band_misses: gpu.band_misses,
+            ..SubstepStats::new()
+        };
+        Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &stats, &stats))
+    }
+
     /// The cloth as a mesh (the garment's own vertex layout and UVs, or the grid's), with
     /// area-weighted normals.
     pub fn to_mesh(&self) -> Mesh {

@@ -90,7 +90,9 @@ impl GpuCollider {
 }
 
 /// What a GPU frame reports: the subset of [`super::ClothFrameMetrics`] that per-particle
-/// flags give without a reduction on the GPU.
+/// flags give without a reduction on the GPU. [`ClothSim::adopt_gpu_frame`] completes it
+/// (strain, residual contacts, energies) from the state read back once per frame, as the
+/// `Cloth` node does.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct GpuClothFrameMetrics {
     pub frame: u32,
@@ -343,6 +345,14 @@ impl GpuCloth {
             pos: pos[..n].to_vec(),
             prev: prev[..n].to_vec(),
         })
+    }
+
+    /// The contacts' side memory (per particle and collider, as [`ClothSim`] keeps it), read
+    /// back.
+    pub fn read_side(&self, ctx: &GpuContext) -> Result<Vec<Vec4>> {
+        let side: Vec<Vec4> = ctx.read_buffer(&self.side)?;
+        let n = self.len() * self.side_fields.max(1);
+        Ok(side[..n.min(side.len())].to_vec())
     }
 
     /// Current particle positions, read back.

@@ -6,197 +6,64 @@
 //! point of the owning triangle, which is costly). The cloth reads 8 cells per particle per
 //! field per substep, so each frame [`FieldCache`] first writes the vector and distance of
 //! the cells around the cloth into one `Vec4` per cell (xyz the vector, w the distance,
-//! negated for far cells), the layout a GPU texture would have.
-//!
-//! The cache is sparse: the box is cut into bricks of 4³ cells, and only bricks with a cell
-//! in the band among their 5³ (the brick and one more cell on its +x, +y, +z sides, so that
-//! every trilinear read stays in one brick) are stored. A read in any other brick has all 8
-//! cells far, so it costs a table lookup, not 8 loads, and the field says nothing there but
-//! its far distance. Filling costs one scan of the box's `nearest` and the vectors of the
-//! bricks near the body, not the whole box. Reads outside the box fall back to the field
-//! itself, with the same result.
+//! negated for far cells), the layout a GPU texture would have. Reads inside that box then
+//! cost 8 loads; reads outside it fall back to the field itself, with the same result.
 
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
 use imprint_core::{DistanceField, FieldSample, Sampling};
 use rayon::prelude::*;
 
-/// Cells per brick edge, and per stored brick edge (one more for the +1 neighbours).
-const B: i32 = 4;
-const S: usize = B as usize + 1;
-const BRICK_CELLS: usize = S * S * S;
-/// A brick with no cell in the band.
-const FAR_BRICK: u32 = u32::MAX;
-
-/// The vectors and distances of a box of a field's cells near the body, computed once per
-/// frame.
+/// The vectors and distances of a box of a field's cells, computed once per frame.
 #[derive(Clone, Debug, Default)]
 pub struct FieldCache {
     /// First cell of the box, and its size in cells (0 when empty).
     lo: IVec3,
     dims: IVec3,
-    /// The box's size in bricks.
-    bricks: IVec3,
-    /// Per brick (x fastest): its first cell in `cells`, or `FAR_BRICK`.
-    slot: Vec<u32>,
-    /// 5³ cells per stored brick, x fastest; w = distance, or -distance for a far cell (its
-    /// vector is zero).
+    /// x fastest; w = distance, or -distance for a far cell (its vector is zero).
     cells: Vec<Vec4>,
-    /// The field's far distance (every far cell's).
-    far: f32,
-    /// Per brick, whether one of its own 4³ cells is in the band (scratch for `fill`).
-    occupied: Vec<bool>,
 }
 
 impl FieldCache {
     /// Fills the cache with the cells of `field` whose centres lie in the box [min, max]
-    /// (clamped to the grid), reusing its buffers.
+    /// (clamped to the grid), reusing its buffer.
     pub fn fill(&mut self, field: &DistanceField, min: Vec3, max: Vec3) {
         let spec = &field.spec;
         let dims = spec.dims.as_ivec3();
         let lo = spec.to_cell(min).floor().as_ivec3().max(IVec3::ZERO);
         let hi = spec.to_cell(max).ceil().as_ivec3().min(dims - 1);
-        self.cells.clear();
-        self.slot.clear();
         if !(min.is_finite() && max.is_finite()) || hi.cmplt(lo).any() {
             self.dims = IVec3::ZERO;
-            self.bricks = IVec3::ZERO;
+            self.cells.clear();
             return;
         }
         self.lo = lo;
         self.dims = hi - lo + 1;
-        self.far = field.far_value();
-        let nb = (self.dims + (B - 1)) / B;
-        self.bricks = nb;
-        let (bx, bxy) = (nb.x as usize, (nb.x * nb.y) as usize);
-        let n_bricks = bxy * nb.z as usize;
-        let in_box = |c: IVec3| c.cmpge(lo).all() && c.cmple(hi).all();
-
-        // Which bricks hold a band cell of their own: one pass over the box's `nearest`.
-        self.occupied.clear();
-        self.occupied.resize(n_bricks, false);
-        self.occupied
-            .par_chunks_mut(bxy)
+        let (nx, ny) = (self.dims.x as usize, self.dims.y as usize);
+        let n = nx * ny * self.dims.z as usize;
+        self.cells.resize(n, Vec4::ZERO);
+        self.cells
+            .par_chunks_mut(nx * ny)
             .enumerate()
-            .for_each(|(bz, plane)| {
-                for (k, occ) in plane.iter_mut().enumerate() {
-                    let b = IVec3::new((k % bx) as i32, (k / bx) as i32, bz as i32);
-                    let first = lo + b * B;
-                    let last = (first + (B - 1)).min(hi);
-                    *occ = (first.z..=last.z).any(|z| {
-                        (first.y..=last.y).any(|y| {
-                            let row = spec.index(UVec3::new(first.x as u32, y as u32, z as u32));
-                            field.nearest[row..=row + (last.x - first.x) as usize]
-                                .iter()
-                                .any(|&n| n != DistanceField::FAR)
-                        })
-                    });
-                }
-            });
-        // A brick is stored when it or one of its +x/+y/+z neighbours (whose first cells are
-        // its 5th row) holds one; slots in brick order.
-        let occupied = &self.occupied;
-        let at = |b: IVec3| {
-            b.cmplt(nb).all() && occupied[b.x as usize + bx * b.y as usize + bxy * b.z as usize]
-        };
-        let mut stored = 0u32;
-        self.slot.extend((0..n_bricks).map(|k| {
-            let b = IVec3::new(
-                (k % bx) as i32,
-                ((k / bx) % nb.y as usize) as i32,
-                (k / bxy) as i32,
-            );
-            let near = (0..8).any(|o| at(b + IVec3::new(o & 1, (o >> 1) & 1, o >> 2)));
-            if near {
-                stored += 1;
-                (stored - 1) * BRICK_CELLS as u32
-            } else {
-                FAR_BRICK
-            }
-        }));
-        self.cells.resize(stored as usize * BRICK_CELLS, Vec4::ZERO);
-        let stored_bricks: Vec<usize> = (0..n_bricks)
-            .filter(|&k| self.slot[k] != FAR_BRICK)
-            .collect();
-        let brick_at = |k: usize| {
-            IVec3::new(
-                (k % bx) as i32,
-                ((k / bx) % nb.y as usize) as i32,
-                (k / bxy) as i32,
-            )
-        };
-        let local =
-            |j: usize| IVec3::new((j % S) as i32, ((j / S) % S) as i32, (j / (S * S)) as i32);
-        let cell_value = |c: UVec3| {
-            let i = spec.index(c);
-            match field.nearest[i] {
-                DistanceField::FAR => Vec4::new(0.0, 0.0, 0.0, -field.dist[i]),
-                p => {
-                    let centre = spec.center(c);
-                    (field.closest_point(p as usize, centre) - centre).extend(field.dist[i])
-                }
-            }
-        };
-        // Each brick's own 4³ cells (the costly closest points, computed once)...
-        self.cells
-            .par_chunks_mut(BRICK_CELLS)
-            .zip(stored_bricks.par_iter())
-            .for_each(|(brick, &k)| {
-                let first = lo + brick_at(k) * B;
-                for (j, out) in brick.iter_mut().enumerate() {
-                    let c = first + local(j);
-                    // The 5th rows are the neighbours' cells; cells past the box are never read.
-                    if local(j).cmplt(IVec3::splat(B)).all() && in_box(c) {
-                        *out = cell_value(c.as_uvec3());
+            .for_each(|(z, slab)| {
+                for y in 0..ny {
+                    for x in 0..nx {
+                        let c = (lo + IVec3::new(x as i32, y as i32, z as i32)).as_uvec3();
+                        let i = spec.index(c);
+                        slab[y * nx + x] = match field.nearest[i] {
+                            DistanceField::FAR => Vec4::new(0.0, 0.0, 0.0, -field.dist[i]),
+                            p => {
+                                let centre = spec.center(c);
+                                (field.closest_point(p as usize, centre) - centre)
+                                    .extend(field.dist[i])
+                            }
+                        };
                     }
-                }
-            });
-        // ...then their 5th rows, copied from the neighbours that own those cells. A band
-        // cell's brick is occupied, hence stored; a far cell costs nothing to write.
-        let (cells, slot) = (&self.cells, &self.slot);
-        let aprons: Vec<Vec<Vec4>> = stored_bricks
-            .par_iter()
-            .map(|&k| {
-                let b = brick_at(k);
-                (0..BRICK_CELLS)
-                    .filter(|&j| local(j).cmpeq(IVec3::splat(B)).any())
-                    .map(|j| {
-                        let c = lo + b * B + local(j);
-                        if !in_box(c) {
-                            return Vec4::ZERO;
-                        }
-                        let i = spec.index(c.as_uvec3());
-                        if field.nearest[i] == DistanceField::FAR {
-                            return Vec4::new(0.0, 0.0, 0.0, -field.dist[i]);
-                        }
-                        let (ob, ol) = ((c - lo) / B, (c - lo) % B);
-                        let owner = slot[ob.x as usize + bx * ob.y as usize + bxy * ob.z as usize];
-                        debug_assert_ne!(owner, FAR_BRICK);
-                        cells[owner as usize
-                            + ol.x as usize
-                            + S * ol.y as usize
-                            + S * S * ol.z as usize]
-                    })
-                    .collect()
-            })
-            .collect();
-        self.cells
-            .par_chunks_mut(BRICK_CELLS)
-            .zip(aprons.par_iter())
-            .for_each(|(brick, apron)| {
-                let rows = (0..BRICK_CELLS).filter(|&j| local(j).cmpeq(IVec3::splat(B)).any());
-                for (j, v) in rows.zip(apron) {
-                    brick[j] = *v;
                 }
             });
     }
 
     pub fn is_empty(&self) -> bool {
-        self.slot.is_empty()
-    }
-
-    /// Bricks stored (near the body) and in the box: what a fill cost.
-    pub fn bricks(&self) -> (usize, usize) {
-        (self.cells.len() / BRICK_CELLS, self.slot.len())
+        self.cells.is_empty()
     }
 }
 
@@ -213,37 +80,27 @@ impl CachedField<'_> {
     pub fn sample(&self, p: Vec3) -> FieldSample {
         let spec = &self.field.spec;
         let (b, t) = cell_coords(spec, p);
-        let cache = self.cache;
-        let r = b - cache.lo;
-        if r.cmplt(IVec3::ZERO).any() || (r + 1).cmpge(cache.dims).any() {
+        let r = b - self.cache.lo;
+        if r.cmplt(IVec3::ZERO).any() || (r + 1).cmpge(self.cache.dims).any() {
             return sample_outside(self.field, p);
         }
-        let br = r / B;
-        let slot = cache.slot[br.x as usize
-            + cache.bricks.x as usize * (br.y as usize + cache.bricks.y as usize * br.z as usize)];
+        let (nx, nxy) = (
+            self.cache.dims.x as usize,
+            (self.cache.dims.x * self.cache.dims.y) as usize,
+        );
+        let i0 = r.x as usize + nx * r.y as usize + nxy * r.z as usize;
         // The field's weights, multiplied in its order; corners x-pairs at 4 (y, z) rows.
         let (wx, wy, wz) = ([1.0 - t.x, t.x], [1.0 - t.y, t.y], [1.0 - t.z, t.z]);
+        let cells = &self.cache.cells;
+        let mut corners = [Vec4::ZERO; 8];
         let mut weights = [0.0f32; 8];
         for yz in 0..4 {
+            let row = i0 + nx * (yz & 1) + nxy * (yz >> 1);
+            let pair = &cells[row..row + 2];
             for x in 0..2 {
+                corners[2 * yz + x] = pair[x];
                 weights[2 * yz + x] = wx[x] * wy[yz & 1] * wz[yz >> 1];
             }
-        }
-        if slot == FAR_BRICK {
-            // All 8 cells far: no vector, the far distance blended as the field blends it.
-            let mut dist = 0.0;
-            for w in weights {
-                dist += w * cache.far;
-            }
-            return finish(dist, Vec3::ZERO, false);
-        }
-        let l = (r & (B - 1)).as_uvec3();
-        let i0 = slot as usize + l.x as usize + S * l.y as usize + S * S * l.z as usize;
-        let cells = &cache.cells;
-        let mut corners = [Vec4::ZERO; 8];
-        for yz in 0..4 {
-            let row = i0 + S * (yz & 1) + S * S * (yz >> 1);
-            corners[2 * yz..2 * yz + 2].copy_from_slice(&cells[row..row + 2]);
         }
         // xyz: the blended vector, lane by lane as the field adds it; w unused here.
         let mut acc = Vec4::ZERO;
@@ -390,12 +247,6 @@ mod tests {
         // A box covering part of the grid: reads inside use the cache, outside the field.
         cache.fill(f, Vec3::new(-0.3, -0.6, -0.2), Vec3::new(0.35, 0.2, 0.9));
         assert!(!cache.is_empty());
-        // Both kinds of brick are read: stored ones near the body, far ones away from it.
-        let (stored, total) = cache.bricks();
-        assert!(
-            stored > 0 && stored < total,
-            "{stored} of {total} bricks stored"
-        );
         let cached = CachedField {
             field: f,
             cache: &cache,
