@@ -2,9 +2,10 @@
 //! distance field built from it.
 
 use crate::GridSpec;
-use glam::{UVec3, Vec3};
+use glam::{UVec3, Vec3, Vec4};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// Which point stands for a surface cell.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -79,6 +80,28 @@ pub struct DistanceField {
     pub points: Arc<Vec<Vec3>>,
     /// The owning triangle of each point, when distances are refined to the triangles.
     pub faces: Option<Arc<Vec<[Vec3; 3]>>>,
+    /// [`DistanceField::cells`], once asked for (write `Default::default()` when building).
+    pub cells: LazyCells,
+}
+
+/// The per-cell vectors of a [`DistanceField`], computed on first use (see
+/// [`DistanceField::cells`]). A clone starts empty again: the clone may be changed.
+#[derive(Default)]
+pub struct LazyCells(OnceLock<Vec<Vec4>>);
+
+impl Clone for LazyCells {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for LazyCells {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0.get() {
+            Some(c) => write!(f, "LazyCells({} computed)", c.len()),
+            None => f.write_str("LazyCells(not computed)"),
+        }
+    }
 }
 
 impl DistanceField {
@@ -109,7 +132,40 @@ impl DistanceField {
             nearest,
             points: Arc::new(points),
             faces: None,
+            cells: Default::default(),
         }
+    }
+
+    /// Per cell: xyz the closest-point vector (as [`DistanceField::vector`]), w the distance,
+    /// negated for far cells (whose vector is zero). The layout the cloth samples and the GPU
+    /// binds: a vector costs one load instead of a closest-point query (on a triangle, for a
+    /// `Closest` field). Computed in parallel on first use and kept, so a field read by many
+    /// substeps, frames or consumers pays once. Change no cell of a field after calling it.
+    pub fn cells(&self) -> &[Vec4] {
+        self.cells.0.get_or_init(|| {
+            let spec = &self.spec;
+            let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
+            let mut out = vec![Vec4::ZERO; spec.len()];
+            out.par_chunks_mut(nx * ny)
+                .enumerate()
+                .for_each(|(z, plane)| {
+                    for y in 0..ny {
+                        for x in 0..nx {
+                            let c = UVec3::new(x as u32, y as u32, z as u32);
+                            let i = spec.index(c);
+                            plane[y * nx + x] = match self.nearest[i] {
+                                Self::FAR => Vec4::new(0.0, 0.0, 0.0, -self.dist[i]),
+                                n => {
+                                    let centre = spec.center(c);
+                                    (self.closest_point(n as usize, centre) - centre)
+                                        .extend(self.dist[i])
+                                }
+                            };
+                        }
+                    }
+                });
+            out
+        })
     }
 
     /// The distance stored in far cells: the band's half-width in world units.

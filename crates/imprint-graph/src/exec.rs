@@ -130,11 +130,36 @@ enum Stage {
     },
 }
 
+/// A resource as consumers saw it on one frame (see [`Observer`]).
+pub enum Observed<'a> {
+    Mesh(&'a Mesh),
+    Field(&'a DistanceField),
+    Heights(&'a HeightField),
+}
+
+/// Sees every resource a run produces, frame by frame: what `imprint sweep` compares between
+/// runs. Boundaries are not shown (they have no error metric of their own).
+pub trait Observer {
+    /// Called after `node` ran (or reused its result) on `frame`, with the value its consumers
+    /// see on that frame.
+    fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>);
+}
+
 /// Runs `plan`; `progress(done, total)` is called after every frame.
 pub fn run(
     plan: &Plan,
     opts: &RunOptions,
     progress: &mut dyn FnMut(u32, u32),
+) -> crate::Result<Report> {
+    run_observed(plan, opts, progress, None)
+}
+
+/// [`run`], showing every frame's resources to `observer`.
+pub fn run_observed(
+    plan: &Plan,
+    opts: &RunOptions,
+    progress: &mut dyn FnMut(u32, u32),
+    mut observer: Option<&mut dyn Observer>,
 ) -> crate::Result<Report> {
     let frames = opts.frames.clone().unwrap_or(0..plan.file.frames);
     if frames.is_empty() || frames.end > plan.file.frames {
@@ -177,6 +202,7 @@ pub fn run(
     let mut values: BTreeMap<String, Value> = BTreeMap::new();
     let total = frames.len() as u32;
     for (done, frame) in frames.clone().enumerate() {
+        let frame_start = Instant::now();
         let time = frame as f32 / plan.file.fps;
         let mut changed: BTreeMap<&str, bool> = BTreeMap::new();
         let mut cpu_fields: BTreeMap<String, Arc<DistanceField>> = BTreeMap::new();
@@ -377,6 +403,17 @@ pub fn run(
                 nr.record(ms);
             }
             changed.insert(name.as_str(), did_run);
+            if let Some(obs) = observer.as_deref_mut() {
+                match values.get(name.as_str()) {
+                    Some(Value::Mesh(m)) => obs.observe(name, frame, Observed::Mesh(m)),
+                    Some(Value::Heights(h)) => obs.observe(name, frame, Observed::Heights(h)),
+                    Some(Value::Field(_)) => {
+                        let f = cpu_field(name, &values, &mut cpu_fields, gpu)?;
+                        obs.observe(name, frame, Observed::Field(&f));
+                    }
+                    Some(Value::Boundary(_)) | None => {}
+                }
+            }
 
             // After the timed part: error measurement and writers.
             match stages.get_mut(name).expect("stage") {
@@ -610,6 +647,9 @@ pub fn run(
             }
         }
         report.frames.push(frame);
+        report
+            .frame_ms
+            .push(frame_start.elapsed().as_secs_f64() * 1e3);
         progress(done as u32 + 1, total);
     }
     // Whole-run writers: only now, after every frame succeeded.

@@ -42,6 +42,8 @@ pub struct Report {
     pub adapter: Option<String>,
     pub threads: usize,
     pub wall_ms: f64,
+    /// Wall time of each frame (all its nodes, writers included), ms.
+    pub frame_ms: Vec<f64>,
     pub nodes: BTreeMap<String, NodeReport>,
     pub pruned: Vec<(String, String)>,
     pub files_written: usize,

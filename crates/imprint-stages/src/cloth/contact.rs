@@ -26,15 +26,15 @@
 //! distance ε (eq. 11), then a fraction b of the substep's tangential displacement is
 //! cancelled (eq. 12, as METHODS reads it).
 
-use super::sampler::CachedField;
+use super::sampler::FieldView;
 use glam::{Vec3, Vec4};
 use imprint_core::FieldSample;
 
 /// One body: its field at the frame's start (when blending) and end.
 #[derive(Clone, Copy)]
 pub struct Collider<'a> {
-    pub start: Option<CachedField<'a>>,
-    pub end: CachedField<'a>,
+    pub start: Option<FieldView<'a>>,
+    pub end: FieldView<'a>,
 }
 
 /// A field read at a particle: signed distance (negative inside) and the outward direction.

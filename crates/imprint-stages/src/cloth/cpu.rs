@@ -11,7 +11,7 @@
 use super::contact::{self, Collider, Hit};
 use super::metrics::{ClothFrameMetrics, Energy};
 use super::params::{ClothParams, Material, Shape};
-use super::sampler::{CachedField, FieldCache};
+use super::sampler::FieldView;
 use super::shape::ClothShape;
 use super::springs::{
     Faces, Hinges, LinkQuad, Links, SpringLaw, enumerate_springs, hinge_angle_gradient,
@@ -153,8 +153,6 @@ pub struct ClothSim {
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: Vec<Vec4>,
     side_fields: usize,
-    /// Per collider, the cached cells of its start and end fields (buffers kept).
-    caches: Vec<FieldCache>,
     stats: Vec<SubstepStats>,
     dt_prev: Option<f32>,
     first_energy: Option<f64>,
@@ -262,7 +260,6 @@ impl ClothSim {
             side: vec![Vec4::ZERO; n],
             backup_side: Vec::new(),
             side_fields: 0,
-            caches: Vec::new(),
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
             dt_prev: None,
             first_energy: None,
@@ -393,61 +390,22 @@ impl ClothSim {
         {
             self.params.check_band(f.far_value(), f.band)?;
         }
-        let eps = self.params.collision.epsilon;
         let nf = fields_end.len();
         if nf != self.side_fields {
             self.side = vec![Vec4::ZERO; self.len() * nf.max(1)];
             self.side_fields = nf;
-        }
-        let n_sub = self.params.substeps;
-        let dt = dt_frame / n_sub as f32;
-
-        // Cache the fields' cells around the cloth: its box now, grown by how far it could
-        // go this frame at its current speed (twice), two cells and ε. Reads outside the box
-        // fall back to the fields themselves, so the margin costs speed, never correctness.
-        let mut caches = std::mem::take(&mut self.caches);
-        caches.resize_with(2 * nf, FieldCache::default);
-        if nf > 0 {
-            let speed = self
-                .state
-                .pos
-                .iter()
-                .zip(&self.state.prev)
-                .map(|(p, q)| (*p - *q).truncate().length_squared())
-                .fold(0.0f32, f32::max)
-                .sqrt()
-                / self.dt_prev.unwrap_or(dt);
-            let (lo, hi) = self.state.pos.iter().fold(
-                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-                |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())),
-            );
-            for (k, &end) in fields_end.iter().enumerate() {
-                let grow = Vec3::splat(2.0 * speed * dt_frame + 2.0 * end.spec.cell + eps);
-                caches[2 * k + 1].fill(end, lo - grow, hi + grow);
-                if blend && !std::ptr::eq(fields_start[k], end) {
-                    caches[2 * k].fill(fields_start[k], lo - grow, hi + grow);
-                }
-            }
         }
         let colliders: Vec<Collider> = fields_end
             .iter()
             .enumerate()
             .map(|(k, &end)| Collider {
                 // A body that did not change (the same field at both ends) needs no blend.
-                start: (blend && !std::ptr::eq(fields_start[k], end)).then(|| CachedField {
-                    field: fields_start[k],
-                    cache: &caches[2 * k],
-                }),
-                end: CachedField {
-                    field: end,
-                    cache: &caches[2 * k + 1],
-                },
+                start: (blend && !std::ptr::eq(fields_start[k], end))
+                    .then(|| FieldView::new(fields_start[k])),
+                end: FieldView::new(end),
             })
             .collect();
-        let result = self.run_frame(&colliders, frame, dt_frame);
-        drop(colliders);
-        self.caches = caches;
-        result
+        self.run_frame(&colliders, frame, dt_frame)
     }
 
     /// The substeps of one frame, against colliders ready to sample.
@@ -746,16 +704,11 @@ impl ClothSim {
         self.side = side;
         self.side_fields = nf;
         self.dt_prev = Some(gpu.dt_substep);
-        // Empty caches: every read takes the field itself (exact; once per frame).
-        let empty = FieldCache::default();
         let colliders: Vec<Collider> = fields_end
             .iter()
             .map(|&f| Collider {
                 start: None,
-                end: CachedField {
-                    field: f,
-                    cache: &empty,
-                },
+                end: FieldView::new(f),
             })
             .collect();
         let stats = SubstepStats {

@@ -60,26 +60,16 @@ pub struct GpuCollider {
 }
 
 impl GpuCollider {
-    /// Uploads `field`: each cell's vector and distance, computed as
-    /// [`DistanceField::vector`] does.
+    /// Uploads `field`'s [`DistanceField::cells`] (each cell's vector and distance).
     pub fn from_field(ctx: &GpuContext, field: &DistanceField) -> Result<Self> {
         let spec = field.spec;
         ctx.check_grid("cloth collider field", spec.dims.to_array(), 16)?;
-        let cells: Vec<Vec4> = (0..spec.len())
-            .map(|i| {
-                if field.is_far(i) {
-                    Vec4::new(0.0, 0.0, 0.0, -field.dist[i])
-                } else {
-                    field.vector(i).extend(field.dist[i])
-                }
-            })
-            .collect();
         static NEXT: AtomicU64 = AtomicU64::new(1);
         Ok(GpuCollider {
             id: NEXT.fetch_add(1, Ordering::Relaxed),
             spec,
             band: field.band,
-            cells: ctx.storage_buffer("cloth collider field", &cells)?,
+            cells: ctx.storage_buffer("cloth collider field", field.cells())?,
         })
     }
 

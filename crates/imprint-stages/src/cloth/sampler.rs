@@ -2,96 +2,48 @@
 //! `DistanceField::sample(p, Sampling::Vector)` (unit tests hold it to that).
 //!
 //! The field stores per cell a distance and the index of its nearest boundary point; the
-//! closest-point vector is derived on every read (point minus cell centre, or the closest
-//! point of the owning triangle, which is costly). The cloth reads 8 cells per particle per
-//! field per substep, so each frame [`FieldCache`] first writes the vector and distance of
-//! the cells around the cloth into one `Vec4` per cell (xyz the vector, w the distance,
-//! negated for far cells), the layout a GPU texture would have. Reads inside that box then
-//! cost 8 loads; reads outside it fall back to the field itself, with the same result.
+//! closest-point vector is derived from them (point minus cell centre, or the closest point
+//! of the owning triangle, which is costly). The cloth reads 8 cells per particle per field
+//! per substep, so it reads [`DistanceField::cells`] instead: one `Vec4` per cell (xyz the
+//! vector, w the distance, negated for far cells), computed once per field and kept with it,
+//! so a static body's field costs nothing after its first frame and a moving body's field
+//! is computed once though the cloth reads it in two frames (as the end, then the start).
+//! Reads in the grid's outermost half cell or outside it take the field's own code.
 
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
 use imprint_core::{DistanceField, FieldSample, Sampling};
-use rayon::prelude::*;
 
-/// The vectors and distances of a box of a field's cells, computed once per frame.
-#[derive(Clone, Debug, Default)]
-pub struct FieldCache {
-    /// First cell of the box, and its size in cells (0 when empty).
-    lo: IVec3,
-    dims: IVec3,
-    /// x fastest; w = distance, or -distance for a far cell (its vector is zero).
-    cells: Vec<Vec4>,
-}
-
-impl FieldCache {
-    /// Fills the cache with the cells of `field` whose centres lie in the box [min, max]
-    /// (clamped to the grid), reusing its buffer.
-    pub fn fill(&mut self, field: &DistanceField, min: Vec3, max: Vec3) {
-        let spec = &field.spec;
-        let dims = spec.dims.as_ivec3();
-        let lo = spec.to_cell(min).floor().as_ivec3().max(IVec3::ZERO);
-        let hi = spec.to_cell(max).ceil().as_ivec3().min(dims - 1);
-        if !(min.is_finite() && max.is_finite()) || hi.cmplt(lo).any() {
-            self.dims = IVec3::ZERO;
-            self.cells.clear();
-            return;
-        }
-        self.lo = lo;
-        self.dims = hi - lo + 1;
-        let (nx, ny) = (self.dims.x as usize, self.dims.y as usize);
-        let n = nx * ny * self.dims.z as usize;
-        self.cells.resize(n, Vec4::ZERO);
-        self.cells
-            .par_chunks_mut(nx * ny)
-            .enumerate()
-            .for_each(|(z, slab)| {
-                for y in 0..ny {
-                    for x in 0..nx {
-                        let c = (lo + IVec3::new(x as i32, y as i32, z as i32)).as_uvec3();
-                        let i = spec.index(c);
-                        slab[y * nx + x] = match field.nearest[i] {
-                            DistanceField::FAR => Vec4::new(0.0, 0.0, 0.0, -field.dist[i]),
-                            p => {
-                                let centre = spec.center(c);
-                                (field.closest_point(p as usize, centre) - centre)
-                                    .extend(field.dist[i])
-                            }
-                        };
-                    }
-                }
-            });
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
-    }
-}
-
-/// A field and the cache of it for this frame.
+/// A field and its cells, looked up once per frame.
 #[derive(Clone, Copy)]
-pub struct CachedField<'a> {
+pub struct FieldView<'a> {
     pub field: &'a DistanceField,
-    pub cache: &'a FieldCache,
+    cells: &'a [Vec4],
+    dims: IVec3,
 }
 
-impl CachedField<'_> {
+impl<'a> FieldView<'a> {
+    /// Computes the field's cells if no one has yet.
+    pub fn new(field: &'a DistanceField) -> Self {
+        FieldView {
+            field,
+            cells: field.cells(),
+            dims: field.spec.dims.as_ivec3(),
+        }
+    }
+
     /// The field at `p`, as `Sampling::Vector` reads it.
     #[inline(always)]
     pub fn sample(&self, p: Vec3) -> FieldSample {
         let spec = &self.field.spec;
         let (b, t) = cell_coords(spec, p);
-        let r = b - self.cache.lo;
-        if r.cmplt(IVec3::ZERO).any() || (r + 1).cmpge(self.cache.dims).any() {
+        if b.cmplt(IVec3::ZERO).any() || (b + 1).cmpge(self.dims).any() {
             return sample_outside(self.field, p);
         }
-        let (nx, nxy) = (
-            self.cache.dims.x as usize,
-            (self.cache.dims.x * self.cache.dims.y) as usize,
-        );
-        let i0 = r.x as usize + nx * r.y as usize + nxy * r.z as usize;
+        let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
+        let i0 = b.x as usize + nx * b.y as usize + nxy * b.z as usize;
         // The field's weights, multiplied in its order; corners x-pairs at 4 (y, z) rows.
         let (wx, wy, wz) = ([1.0 - t.x, t.x], [1.0 - t.y, t.y], [1.0 - t.z, t.z]);
-        let cells = &self.cache.cells;
+        let cells = self.cells;
         let mut corners = [Vec4::ZERO; 8];
         let mut weights = [0.0f32; 8];
         for yz in 0..4 {
@@ -243,18 +195,18 @@ mod tests {
     }
 
     fn check(f: &DistanceField) {
-        let mut cache = FieldCache::default();
-        // A box covering part of the grid: reads inside use the cache, outside the field.
-        cache.fill(f, Vec3::new(-0.3, -0.6, -0.2), Vec3::new(0.35, 0.2, 0.9));
-        assert!(!cache.is_empty());
-        let cached = CachedField {
-            field: f,
-            cache: &cache,
-        };
+        let view = FieldView::new(f);
         for p in points() {
             let want = f.sample(p, Sampling::Vector);
             assert_same(sample_vector(f, p), want, p);
-            assert_same(cached.sample(p), want, p);
+            assert_same(view.sample(p), want, p);
+        }
+        // The cells are the field's vectors and distances.
+        for i in (0..f.spec.len()).step_by(7) {
+            let c = f.cells()[i];
+            assert_eq!(c.truncate(), f.vector(i));
+            assert_eq!(c.w.abs(), f.dist[i]);
+            assert_eq!(c.w < 0.0, f.is_far(i));
         }
     }
 

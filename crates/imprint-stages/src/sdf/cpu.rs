@@ -140,6 +140,7 @@ impl FieldBuilder {
             nearest,
             points: Arc::new(boundary.points.clone()),
             faces: refine.then(|| Arc::new(boundary.faces.clone())),
+            cells: Default::default(),
         })
     }
 }

@@ -77,6 +77,7 @@ impl GpuField {
             faces: (self.boundary.variant == BoundaryVariant::Closest)
                 .then(|| Arc::new(boundary.faces)),
             points: Arc::new(boundary.points),
+            cells: Default::default(),
         })
     }
 }
