@@ -322,3 +322,30 @@ fn boundary_points_scale_with_area_not_triangle_count() {
         .len() as f32;
     assert!((a - b).abs() / b < 0.02, "{a} vs {b}");
 }
+
+/// A field built in parts (one per frame, as `split` schedules it) is the field built at
+/// once, bit for bit, for any number of parts, with and without the triangle refinement.
+#[test]
+fn a_field_built_in_parts_is_the_field_built_at_once() {
+    let m = mesh("suzanne");
+    for variant in [BoundaryVariant::Closest, BoundaryVariant::Centre] {
+        let spec = GridSpec::fit(&m.bounds(), 40, 0.1).unwrap();
+        let b = voxelize_cpu(&m, &spec, variant).unwrap();
+        let whole = build_field_cpu(&b, 3.0).unwrap();
+        let mut builder = imprint_stages::sdf::FieldBuilder::default();
+        for parts in [2u32, 3, 7, 40, 41] {
+            let mut build = builder.start(&b, 3.0).unwrap();
+            for p in 0..parts {
+                build.run_part(p, parts);
+            }
+            let f = build.finish(&mut builder);
+            assert_eq!(f.nearest, whole.nearest, "{variant:?}, {parts} parts");
+            let same = f
+                .dist
+                .iter()
+                .zip(&whole.dist)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "{variant:?}, {parts} parts: distances differ");
+        }
+    }
+}

@@ -168,6 +168,55 @@ impl DistanceField {
         })
     }
 
+    /// The linear blend of two fields of the same grid and band at weight `s` (0: `a`, 1:
+    /// `b`): what a body between two builds looks like (H eq. 13-14). Per cell, the distance
+    /// is `a + (b - a) s` exactly and the closest-point vector is blended the same way (the
+    /// cell's blended closest point becomes its own boundary point); cells far in both stay
+    /// far.
+    pub fn blend(a: &DistanceField, b: &DistanceField, s: f32) -> crate::Result<DistanceField> {
+        if a.spec != b.spec || a.band != b.band {
+            return Err(crate::Error::Invalid(format!(
+                "cannot blend fields of different grids or bands ({:?}, band {} vs {:?}, band {})",
+                a.spec, a.band, b.spec, b.band
+            )));
+        }
+        let spec = a.spec;
+        let (ca, cb) = (a.cells(), b.cells());
+        let blended: Vec<(f32, Option<Vec3>)> = (0..spec.len())
+            .into_par_iter()
+            .map(|i| {
+                let d = a.dist[i] + (b.dist[i] - a.dist[i]) * s;
+                if a.is_far(i) && b.is_far(i) {
+                    return (d, None);
+                }
+                let (va, vb) = (ca[i].truncate(), cb[i].truncate());
+                (d, Some(spec.center(spec.coords(i)) + va + (vb - va) * s))
+            })
+            .collect();
+        let mut points = Vec::new();
+        let mut nearest = Vec::with_capacity(spec.len());
+        let mut dist = Vec::with_capacity(spec.len());
+        for (d, p) in blended {
+            dist.push(d);
+            nearest.push(match p {
+                Some(p) => {
+                    points.push(p);
+                    (points.len() - 1) as u32
+                }
+                None => Self::FAR,
+            });
+        }
+        Ok(DistanceField {
+            spec,
+            band: a.band,
+            dist,
+            nearest,
+            points: Arc::new(points),
+            faces: None,
+            cells: Default::default(),
+        })
+    }
+
     /// The distance stored in far cells: the band's half-width in world units.
     pub fn far_value(&self) -> f32 {
         self.band * self.spec.cell

@@ -5,6 +5,7 @@
 //! frame. A resource stays where its producer made it: a GPU boundary feeding a GPU field never
 //! comes back to the CPU; only writers and error measurement read fields back.
 
+use crate::field_stage::{Ahead, FieldSchedule, Published};
 use crate::plan::Plan;
 use crate::report::{NodeReport, Report};
 use crate::schema::{
@@ -19,8 +20,8 @@ use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, ren
 use imprint_render::gpu_frame::GpuRenderer;
 use imprint_render::sequence::{ContactSheet, GifWriter};
 use imprint_render::slice::SliceOptions;
-use imprint_stages::cloth::ClothSim;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
+use imprint_stages::cloth::{Body, ClothSim};
 use imprint_stages::depth::{HeightRegion, HeightView};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
@@ -57,10 +58,15 @@ enum BoundaryValue {
     Gpu(Arc<GpuBoundary>),
 }
 
+/// A cloth collider over one frame: start field (if blending), end field, span of the blend.
+type BodyFields = (Option<Arc<DistanceField>>, Arc<DistanceField>, (f32, f32));
+
 #[derive(Clone)]
 enum FieldValue {
     Cpu(Arc<DistanceField>),
     Gpu(Arc<GpuField>),
+    /// Two builds and the weight between them (an interpolated field node).
+    Blend(Published),
 }
 
 enum Stage {
@@ -74,13 +80,15 @@ enum Stage {
     },
     Field {
         input: String,
-        band: f32,
         gpu: bool,
         measure: Measure,
         /// The Mesh node behind the boundary: the exact reference for error measurement.
         mesh_node: String,
         measured: u32,
-        builder: imprint_stages::sdf::FieldBuilder,
+        /// Builds finished so far (`Measure::Every` counts these).
+        builds: u32,
+        /// Builds, parts of builds and interpolation (see `field_stage`).
+        sched: Box<FieldSchedule>,
     },
     WriteField {
         input: String,
@@ -200,14 +208,31 @@ pub fn run_observed(
     report.adapter = gpu.map(|g| g.adapter_name());
 
     let mut values: BTreeMap<String, Value> = BTreeMap::new();
+    // A node's output version goes up with every new value; a node recomputes on its
+    // keyframes only when its inputs' versions moved since it last began computing.
+    let mut versions: BTreeMap<String, u64> = BTreeMap::new();
+    let mut seen: BTreeMap<String, Vec<u64>> = BTreeMap::new();
+    let first_frame = frames.start as i64;
     let total = frames.len() as u32;
     for (done, frame) in frames.clone().enumerate() {
         let frame_start = Instant::now();
         let time = frame as f32 / plan.file.fps;
-        let mut changed: BTreeMap<&str, bool> = BTreeMap::new();
         let mut cpu_fields: BTreeMap<String, Arc<DistanceField>> = BTreeMap::new();
         for name in &plan.order {
             let first_run = !values.contains_key(name);
+            let spec = &plan.file.nodes[name];
+            let sc = spec.schedule();
+            let key = sc.is_key(frame as i64);
+            let input_versions: Vec<u64> = spec
+                .inputs()
+                .iter()
+                .map(|(_, i, _)| versions.get(*i).copied().unwrap_or(0))
+                .collect();
+            let changed = seen.get(name) != Some(&input_versions);
+            // Computed from the inputs as they are now (they are then up to date).
+            let mut began = false;
+            // A field node published a new build (not only a new blend weight).
+            let mut new_build = false;
             let stage = stages
                 .get_mut(name)
                 .expect("every planned node has a stage");
@@ -216,6 +241,7 @@ pub fn run_observed(
             let did_run = match stage {
                 Stage::Mesh(source) => {
                     if first_run || !source.is_static() {
+                        began = true;
                         let mesh = source.at(time);
                         if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
                             return Err(Error::Numerical {
@@ -241,7 +267,8 @@ pub fn run_observed(
                     gpu: on_gpu,
                     cpu,
                 } => {
-                    if first_run || changed[input.as_str()] {
+                    if first_run || (key && changed) {
+                        began = true;
                         let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
                             unreachable!("edges are typed")
                         };
@@ -266,45 +293,85 @@ pub fn run_observed(
                 }
                 Stage::Field {
                     input,
-                    band,
                     gpu: on_gpu,
-                    builder,
+                    sched,
                     ..
                 } => {
-                    if first_run || changed[input.as_str()] {
-                        // Last frame's field, if nobody holds it any more, lends its buffers.
-                        if let Some(Value::Field(FieldValue::Cpu(old))) =
-                            values.remove(name.as_str())
-                            && let Ok(old) = Arc::try_unwrap(old)
-                        {
-                            builder.recycle(old);
-                        }
-                        let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
-                            unreachable!("edges are typed")
-                        };
-                        let f = if *on_gpu {
+                    let step = if sched.schedule.interpolate {
+                        sched.step_interpolated(
+                            frame as i64,
+                            first_frame,
+                            sched.ahead.as_ref().is_some_and(|a| a.mesh.is_static()),
+                        )?
+                    } else if *on_gpu {
+                        if first_run || (key && changed) {
+                            let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
+                                unreachable!("edges are typed")
+                            };
                             let ctx = gpu.expect("GPU chosen at build");
                             let gb = match b {
                                 BoundaryValue::Gpu(g) => g.clone(),
                                 BoundaryValue::Cpu(c) => Arc::new(GpuBoundary::from_cpu(ctx, c)?),
                             };
-                            let f = imprint_stages::sdf::gpu::build_field_gpu(ctx, &gb, *band)?;
+                            let f =
+                                imprint_stages::sdf::gpu::build_field_gpu(ctx, &gb, sched.band)?;
                             ctx.wait()?;
-                            FieldValue::Gpu(Arc::new(f))
-                        } else {
-                            let cb = match b {
-                                BoundaryValue::Cpu(c) => c.clone(),
-                                BoundaryValue::Gpu(g) => {
-                                    Arc::new(g.to_cpu(gpu.expect("GPU in use"))?)
-                                }
-                            };
-                            FieldValue::Cpu(Arc::new(builder.build(&cb, *band)?))
-                        };
-                        values.insert(name.clone(), Value::Field(f));
-                        true
+                            values.insert(name.clone(), Value::Field(FieldValue::Gpu(Arc::new(f))));
+                            versions
+                                .entry(name.clone())
+                                .and_modify(|v| *v += 1)
+                                .or_insert(1);
+                            began = true;
+                            new_build = true;
+                        }
+                        crate::field_stage::Step {
+                            published: None,
+                            worked: began,
+                            began,
+                        }
                     } else {
-                        false
+                        // Last frame's field, if nobody holds it any more, lends its buffers.
+                        if (first_run || (key && changed))
+                            && sched.schedule.split == 1
+                            && let Some(Value::Field(FieldValue::Cpu(old))) =
+                                values.get(name.as_str())
+                            && Arc::strong_count(old) == 1
+                            && let Some(Value::Field(FieldValue::Cpu(old))) =
+                                values.remove(name.as_str())
+                            && let Ok(old) = Arc::try_unwrap(old)
+                        {
+                            sched.builder.recycle(old);
+                        }
+                        let Some(Value::Boundary(b)) = values.get(input.as_str()) else {
+                            unreachable!("edges are typed")
+                        };
+                        let cb = match b {
+                            BoundaryValue::Cpu(c) => c.clone(),
+                            BoundaryValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
+                        };
+                        sched.step(frame as i64, first_run, changed, &cb)?
+                    };
+                    began |= step.began;
+                    if let Some(p) = step.published {
+                        new_build |= matches!(p, Published::One(_));
+                        let v = match p {
+                            Published::One(f) => FieldValue::Cpu(f),
+                            blend => FieldValue::Blend(blend),
+                        };
+                        // A static interpolated field publishes the same build again: no change.
+                        let same = matches!(
+                            (&v, values.get(name.as_str())),
+                            (FieldValue::Cpu(n), Some(Value::Field(FieldValue::Cpu(o)))) if Arc::ptr_eq(n, o)
+                        );
+                        values.insert(name.clone(), Value::Field(v));
+                        if !same {
+                            versions
+                                .entry(name.clone())
+                                .and_modify(|v| *v += 1)
+                                .or_insert(1);
+                        }
                     }
+                    step.worked
                 }
                 Stage::Cloth {
                     colliders,
@@ -313,12 +380,14 @@ pub fn run_observed(
                     gpu: gpu_cloth,
                     gpu_previous,
                 } => {
-                    let end = colliders
-                        .iter()
-                        .map(|c| cpu_field(c, &values, &mut cpu_fields, gpu))
-                        .collect::<crate::Result<Vec<_>>>()?;
                     let dt = 1.0 / plan.file.fps;
                     let (m, mesh) = if let Some(g) = gpu_cloth {
+                        // Interpolated colliders arrive as fields blended at the frame's end
+                        // (and last frame's end is this frame's start).
+                        let end = colliders
+                            .iter()
+                            .map(|c| cpu_field(c, &values, &mut cpu_fields, gpu))
+                            .collect::<crate::Result<Vec<_>>>()?;
                         let ctx = gpu.expect("GPU chosen at build");
                         let mut now = Vec::with_capacity(end.len());
                         for (k, f) in end.iter().enumerate() {
@@ -345,11 +414,43 @@ pub fn run_observed(
                         )?;
                         (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
                     } else {
-                        let end_refs: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
-                        let start_refs: Vec<&DistanceField> =
-                            previous.iter().map(|f| &**f).collect();
-                        let m = sim.step_frame(&start_refs, &end_refs, frame, dt)?;
-                        *previous = end;
+                        // Per collider: the two fields the frame blends between and its span
+                        // of the blend: last frame's and this frame's field, or an
+                        // interpolated node's two builds around the frame.
+                        let mut ends: Vec<BodyFields> = Vec::with_capacity(colliders.len());
+                        for (k, c) in colliders.iter().enumerate() {
+                            ends.push(match values.get(c.as_str()) {
+                                Some(Value::Field(FieldValue::Blend(Published::Blend {
+                                    a,
+                                    b,
+                                    a_key,
+                                    every,
+                                    weight,
+                                }))) => {
+                                    let s0 = if frame as i64 == first_frame {
+                                        *weight
+                                    } else {
+                                        (frame as i64 - 1 - a_key) as f32 / *every as f32
+                                    };
+                                    (Some(a.clone()), b.clone(), (s0, *weight))
+                                }
+                                _ => (
+                                    previous.get(k).cloned(),
+                                    cpu_field(c, &values, &mut cpu_fields, gpu)?,
+                                    (0.0, 1.0),
+                                ),
+                            });
+                        }
+                        let bodies: Vec<Body> = ends
+                            .iter()
+                            .map(|(start, end, span)| Body {
+                                start: start.as_deref(),
+                                end,
+                                span: *span,
+                            })
+                            .collect();
+                        let m = sim.step_frame_between(&bodies, frame, dt)?;
+                        *previous = ends.into_iter().map(|(_, e, _)| e).collect();
                         (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
                     };
                     let per_frame = nr
@@ -361,6 +462,11 @@ pub fn run_observed(
                     }
                     nr.metrics.insert("particles".into(), sim.len().into());
                     values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
+                    versions
+                        .entry(name.clone())
+                        .and_modify(|v| *v += 1)
+                        .or_insert(1);
+                    began = true;
                     true
                 }
                 Stage::Heightmap {
@@ -369,7 +475,8 @@ pub fn run_observed(
                     view,
                     gpu: raster,
                 } => {
-                    if first_run || changed[input.as_str()] {
+                    if first_run || (key && changed) {
+                        began = true;
                         let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
                             unreachable!("edges are typed")
                         };
@@ -400,9 +507,22 @@ pub fn run_observed(
             };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             if did_run {
-                nr.record(ms);
+                nr.record(frame, ms);
             }
-            changed.insert(name.as_str(), did_run);
+            if began {
+                seen.insert(name.clone(), input_versions);
+                // Mesh, boundary and height nodes publish a new value whenever they compute
+                // (fields and cloths count their own).
+                if matches!(
+                    spec,
+                    NodeSpec::Mesh(_) | NodeSpec::Voxelize(_) | NodeSpec::Heightmap(_)
+                ) {
+                    versions
+                        .entry(name.clone())
+                        .and_modify(|v| *v += 1)
+                        .or_insert(1);
+                }
+            }
             if let Some(obs) = observer.as_deref_mut() {
                 match values.get(name.as_str()) {
                     Some(Value::Mesh(m)) => obs.observe(name, frame, Observed::Mesh(m)),
@@ -421,26 +541,54 @@ pub fn run_observed(
                     measure,
                     mesh_node,
                     measured,
+                    builds,
+                    sched,
                     ..
-                } if did_run || done == 0 => {
-                    let due = match *measure {
-                        Measure::Never => false,
-                        Measure::First => *measured == 0,
-                        Measure::Every(k) => (done as u32).is_multiple_of(k),
-                    };
-                    let field = cpu_field(name, &values, &mut cpu_fields, gpu)?;
-                    let nr = report.nodes.get_mut(name).expect("report");
-                    nr.metrics
-                        .insert("band_cells".into(), field.band_cells().into());
-                    nr.metrics
-                        .insert("boundary_points".into(), field.points.len().into());
-                    if due {
-                        let t = Instant::now();
-                        let Some(Value::Mesh(mesh)) = values.get(mesh_node.as_str()) else {
-                            unreachable!("the mesh node ran before the field")
+                } if did_run || new_build => {
+                    // The builds finished this frame, with the mesh each was made from. A
+                    // build split over frames read the mesh of its first frame, which is gone.
+                    let finished: Vec<(Arc<DistanceField>, Arc<Mesh>)> =
+                        if sched.schedule.interpolate {
+                            sched
+                                .finished
+                                .iter()
+                                .map(|(f, m)| (f.clone(), Arc::new(m.clone())))
+                                .collect()
+                        } else if new_build && sched.schedule.split == 1 {
+                            let Some(Value::Mesh(mesh)) = values.get(mesh_node.as_str()) else {
+                                unreachable!("the mesh node ran before the field")
+                            };
+                            vec![(
+                                cpu_field(name, &values, &mut cpu_fields, gpu)?,
+                                mesh.clone(),
+                            )]
+                        } else {
+                            Vec::new()
                         };
+                    let nr = report.nodes.get_mut(name).expect("report");
+                    if sched.schedule.split > 1 && !sched.schedule.interpolate {
+                        nr.metrics.insert(
+                            "error_cells".into(),
+                            "not measured: a split build's mesh is gone when it finishes".into(),
+                        );
+                    }
+                    for (field, mesh) in finished {
+                        *builds += 1;
+                        nr.metrics
+                            .insert("band_cells".into(), field.band_cells().into());
+                        nr.metrics
+                            .insert("boundary_points".into(), field.points.len().into());
+                        let due = match *measure {
+                            Measure::Never => false,
+                            Measure::First => *measured == 0,
+                            Measure::Every(k) => (*builds - 1).is_multiple_of(k),
+                        };
+                        if !due {
+                            continue;
+                        }
+                        let t = Instant::now();
                         let err =
-                            imprint_stages::metrics::field_error_with(&field, &Bvh::new(mesh));
+                            imprint_stages::metrics::field_error_with(&field, &Bvh::new(&mesh));
                         nr.measure_ms += t.elapsed().as_secs_f64() * 1e3;
                         *measured += 1;
                         let worst = nr
@@ -477,7 +625,7 @@ pub fn run_observed(
                     npy,
                     slices,
                     every,
-                } if (done as u32).is_multiple_of(*every) => {
+                } if key => {
                     let t = Instant::now();
                     let field = cpu_field(input, &values, &mut cpu_fields, gpu)?;
                     let mut n = 0;
@@ -491,7 +639,7 @@ pub fn run_observed(
                     }
                     report.files_written += n;
                     let nr = report.nodes.get_mut(name).expect("report");
-                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.record(frame, t.elapsed().as_secs_f64() * 1e3);
                     nr.metrics
                         .insert("dir".into(), dir.display().to_string().into());
                     let files = nr
@@ -506,7 +654,7 @@ pub fn run_observed(
                     dir,
                     format,
                     every,
-                } if (done as u32).is_multiple_of(*every) => {
+                } if key => {
                     let t = Instant::now();
                     let Some(Value::Mesh(mesh)) = values.get(input.as_str()) else {
                         unreachable!("edges are typed")
@@ -525,7 +673,7 @@ pub fn run_observed(
                     };
                     report.files_written += 1;
                     let nr = report.nodes.get_mut(name).expect("report");
-                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.record(frame, t.elapsed().as_secs_f64() * 1e3);
                     nr.metrics
                         .insert("last".into(), path.display().to_string().into());
                     let files = nr
@@ -540,7 +688,7 @@ pub fn run_observed(
                     dir,
                     formats,
                     every,
-                } if (done as u32).is_multiple_of(*every) => {
+                } if key => {
                     let t = Instant::now();
                     let Some(Value::Heights(hf)) = values.get(input.as_str()) else {
                         unreachable!("edges are typed")
@@ -567,7 +715,7 @@ pub fn run_observed(
                     }
                     report.files_written += formats.len();
                     let nr = report.nodes.get_mut(name).expect("report");
-                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.record(frame, t.elapsed().as_secs_f64() * 1e3);
                     nr.metrics
                         .insert("dir".into(), dir.display().to_string().into());
                 }
@@ -578,7 +726,7 @@ pub fn run_observed(
                     sheet,
                     gif,
                     gpu: renderer,
-                } if (done as u32).is_multiple_of(node.every) => {
+                } if key => {
                     let t = Instant::now();
                     let mut scene = Scene {
                         ground_grid: node.ground_grid.then(GroundGrid::default),
@@ -639,7 +787,7 @@ pub fn run_observed(
                     }
                     *rendered += 1;
                     let nr = report.nodes.get_mut(name).expect("report");
-                    nr.record(t.elapsed().as_secs_f64() * 1e3);
+                    nr.record(frame, t.elapsed().as_secs_f64() * 1e3);
                     nr.metrics
                         .insert("last".into(), path.display().to_string().into());
                 }
@@ -758,6 +906,7 @@ fn cpu_field(
     let f = match f {
         FieldValue::Cpu(f) => f.clone(),
         FieldValue::Gpu(g) => Arc::new(g.to_cpu(gpu.expect("GPU in use"))?),
+        FieldValue::Blend(p) => p.field()?,
     };
     cache.insert(name.to_string(), f.clone());
     Ok(f)
@@ -787,6 +936,53 @@ fn choose_gpu(
     }
 }
 
+/// The box a mesh sweeps over the whole run (every frame up to 64 samples), so a fitted grid
+/// holds the motion and partial runs get the same grid.
+fn swept_bounds(plan: &Plan, src: &MeshSource) -> imprint_core::Aabb {
+    let frames = plan.file.frames;
+    let step = frames.div_ceil(64).max(1) as usize;
+    let times = (0..frames)
+        .step_by(step)
+        .chain([frames - 1])
+        .map(|f| f as f32 / plan.file.fps);
+    src.sampled_bounds(times)
+}
+
+/// The grid of Voxelize node `name` (a fitted grid takes its mesh's swept box, found in
+/// `bounds` or computed for a mesh that does not run itself).
+fn voxel_spec(
+    plan: &Plan,
+    name: &str,
+    v: &crate::schema::VoxelizeNode,
+    bounds: &mut BTreeMap<String, imprint_core::Aabb>,
+) -> crate::Result<GridSpec> {
+    Ok(match v.grid {
+        GridChoice::Fit {
+            resolution,
+            padding,
+        } => {
+            if !bounds.contains_key(&v.mesh)
+                && let NodeSpec::Mesh(p) = &plan.file.nodes[&v.mesh]
+            {
+                let src = MeshSource::new(p, &plan.base_dir)?;
+                bounds.insert(v.mesh.clone(), swept_bounds(plan, &src));
+            }
+            let b = bounds.get(&v.mesh).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "node '{name}': Fit needs the swept box of a Mesh node, and '{}' is computed while running; give an Explicit grid",
+                    v.mesh
+                ))
+            })?;
+            GridSpec::fit(b, resolution, padding)?
+        }
+        GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
+            glam::Vec3::new(origin.0, origin.1, origin.2),
+            cell,
+            glam::UVec3::new(dims.0, dims.1, dims.2),
+        )?,
+    })
+}
+
 fn build_stages(
     plan: &Plan,
     opts: &RunOptions,
@@ -800,37 +996,11 @@ fn build_stages(
         let stage = match node {
             NodeSpec::Mesh(p) => {
                 let src = MeshSource::new(p, &plan.base_dir)?;
-                // The box the mesh sweeps over the whole run (every frame up to 64 samples),
-                // so a fitted grid holds the motion and partial runs get the same grid.
-                let frames = plan.file.frames;
-                let step = frames.div_ceil(64).max(1) as usize;
-                let times = (0..frames)
-                    .step_by(step)
-                    .chain([frames - 1])
-                    .map(|f| f as f32 / plan.file.fps);
-                rest_bounds.insert(name.clone(), src.sampled_bounds(times));
+                rest_bounds.insert(name.clone(), swept_bounds(plan, &src));
                 Stage::Mesh(Box::new(src))
             }
             NodeSpec::Voxelize(v) => {
-                let spec = match v.grid {
-                    GridChoice::Fit {
-                        resolution,
-                        padding,
-                    } => {
-                        let bounds = rest_bounds.get(&v.mesh).ok_or_else(|| {
-                            Error::Invalid(format!(
-                                "node '{name}': Fit needs the swept box of a Mesh node, and '{}' is computed while running; give an Explicit grid",
-                                v.mesh
-                            ))
-                        })?;
-                        GridSpec::fit(bounds, resolution, padding)?
-                    }
-                    GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
-                        glam::Vec3::new(origin.0, origin.1, origin.2),
-                        cell,
-                        glam::UVec3::new(dims.0, dims.1, dims.2),
-                    )?,
-                };
+                let spec = voxel_spec(plan, name, v, &mut rest_bounds)?;
                 // Scratch, field and the writers' copies: refuse now rather than fail later.
                 spec.check_memory(
                     &format!("node '{name}': voxelisation and distance field"),
@@ -853,14 +1023,31 @@ fn build_stages(
                 let NodeSpec::Voxelize(v) = &plan.file.nodes[&f.boundary] else {
                     unreachable!("edges are typed")
                 };
+                // Interpolated fields voxelise their own mesh at keyframe times, on the CPU.
+                let ahead = if f.interpolate {
+                    let NodeSpec::Mesh(m) = &plan.file.nodes[&v.mesh] else {
+                        unreachable!("checked by the plan")
+                    };
+                    let spec = voxel_spec(plan, &f.boundary, v, &mut rest_bounds)?;
+                    Some(Ahead {
+                        mesh: Box::new(MeshSource::new(m, &plan.base_dir)?),
+                        variant: v.variant,
+                        voxelizer: Voxelizer::new(spec)?,
+                        fps: plan.file.fps,
+                    })
+                } else {
+                    None
+                };
+                let sc = node.schedule();
                 Stage::Field {
                     input: f.boundary.clone(),
-                    band: f.band,
-                    gpu: choose_gpu(want, name, gpu)?,
+                    // Split and interpolated builds run on the CPU (in parts, ahead of time).
+                    gpu: sc.split == 1 && !sc.interpolate && choose_gpu(want, name, gpu)?,
                     measure: f.measure,
                     mesh_node: v.mesh.clone(),
                     measured: 0,
-                    builder: Default::default(),
+                    builds: 0,
+                    sched: Box::new(FieldSchedule::new(sc, f.band, ahead)),
                 }
             }
             NodeSpec::Render(r) => Stage::Render {

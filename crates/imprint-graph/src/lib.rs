@@ -7,9 +7,11 @@
 
 pub mod diagnostics;
 pub mod exec;
+pub mod field_stage;
 pub mod overrides;
 pub mod plan;
 pub mod report;
+pub mod schedule;
 pub mod schema;
 
 pub use diagnostics::PipelineError;

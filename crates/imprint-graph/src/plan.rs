@@ -20,6 +20,8 @@ pub struct Plan {
     pub order: Vec<String>,
     /// Nodes that do not run, with the reason.
     pub pruned: Vec<(String, String)>,
+    /// What the user should know before running (a writer that lost its input…).
+    pub warnings: Vec<String>,
 }
 
 /// Reads, overrides (`NODE.FIELD=VALUE`) and validates a pipeline file.
@@ -150,6 +152,7 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             }
         }
         check_values(&source, name, node, base_dir)?;
+        check_schedule(&source, name, &file)?;
     }
 
     // Prune what reaches no writer.
@@ -164,11 +167,59 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             stack.extend(graph.neighbors_directed(n, petgraph::Direction::Incoming));
         }
     }
+    // Switched off: `enabled: false` and everything downstream of it.
+    let mut off: BTreeMap<NodeIndex, String> = BTreeMap::new();
+    let mut warnings = Vec::new();
+    for &n in &order {
+        let name = graph[n];
+        if !file.nodes[name].enabled() {
+            off.insert(n, "disabled (enabled: false)".into());
+        } else if let Some(up) = graph
+            .neighbors_directed(n, petgraph::Direction::Incoming)
+            .find(|u| off.contains_key(u))
+        {
+            off.insert(n, format!("reads '{}', which is switched off", graph[up]));
+            if file.nodes[name].is_writer() && needed.contains(&n) {
+                warnings.push(format!(
+                    "writer '{name}' loses its input '{}' (switched off), so it writes nothing",
+                    graph[up]
+                ));
+            }
+        }
+    }
+    // Read ahead of time only: the mesh and boundary behind an interpolated field, when no
+    // other running node reads them (the field evaluates them itself, at later times).
+    let mut ahead: BTreeMap<NodeIndex, String> = BTreeMap::new();
+    for &n in order.iter().rev() {
+        let runs = |m: &NodeIndex| needed.contains(m) && !off.contains_key(m);
+        if !runs(&n) || file.nodes[graph[n]].is_writer() {
+            continue;
+        }
+        let consumers: Vec<NodeIndex> = graph
+            .neighbors_directed(n, petgraph::Direction::Outgoing)
+            .filter(runs)
+            .collect();
+        let reader = |c: &NodeIndex| match &file.nodes[graph[*c]] {
+            NodeSpec::DistanceField(f) if f.interpolate => Some(graph[*c].to_string()),
+            _ => ahead.get(c).cloned(),
+        };
+        let readers: Option<Vec<String>> = consumers.iter().map(reader).collect();
+        if let Some(r) = readers.filter(|r| !r.is_empty()) {
+            ahead.insert(n, r[0].clone());
+        }
+    }
     let mut run_order = Vec::new();
     let mut pruned = Vec::new();
     for n in order {
         let name = graph[n].to_string();
-        if needed.contains(&n) {
+        if let Some(why) = off.get(&n) {
+            pruned.push((name, why.clone()));
+        } else if let Some(field) = ahead.get(&n) {
+            pruned.push((
+                name,
+                format!("only '{field}' reads it, building ahead of time (interpolate)"),
+            ));
+        } else if needed.contains(&n) {
             run_order.push(name);
         } else {
             let reason = if writers.is_empty() {
@@ -185,6 +236,7 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
         base_dir: base_dir.to_path_buf(),
         order: run_order,
         pruned,
+        warnings,
     })
 }
 
@@ -265,9 +317,6 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             }
         }
         NodeSpec::Render(r) => {
-            if r.every == 0 {
-                return Err(fail("every", "every must be at least 1".into()));
-            }
             if !r.out.contains("{frame") {
                 return Err(fail(
                     "out",
@@ -341,9 +390,6 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 .map_err(|e| fail("params", e.to_string()))?;
         }
         NodeSpec::WriteHeightmap(w) => {
-            if w.every == 0 {
-                return Err(fail("every", "every must be at least 1".into()));
-            }
             if w.formats.is_empty() {
                 return Err(fail(
                     "formats",
@@ -351,11 +397,67 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 ));
             }
         }
-        NodeSpec::WriteField(crate::schema::WriteFieldNode { every, .. })
-        | NodeSpec::WriteMesh(crate::schema::WriteMeshNode { every, .. }) => {
-            if *every == 0 {
-                return Err(fail("every", "every must be at least 1".into()));
-            }
+        NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => {}
+    }
+    Ok(())
+}
+
+/// `every`, `offset`, `split` and `interpolate` (see [`crate::schedule`]).
+fn check_schedule(source: &Source, name: &str, file: &PipelineFile) -> Result<()> {
+    let node = &file.nodes[name];
+    let sc = node.schedule();
+    let fail = |field: &str, msg: String, help: Option<String>| -> Error {
+        source
+            .error(
+                source.field_span(name, field),
+                format!("node '{name}': {msg}"),
+                "invalid value",
+                help,
+            )
+            .into()
+    };
+    if sc.every == 0 {
+        return Err(fail("every", "every must be at least 1".into(), None));
+    }
+    if sc.offset >= sc.every {
+        return Err(fail(
+            "offset",
+            format!(
+                "offset must be less than every ({}), got {}",
+                sc.every, sc.offset
+            ),
+            None,
+        ));
+    }
+    if sc.split == 0 || sc.split > sc.every {
+        return Err(fail(
+            "split",
+            format!(
+                "split must be between 1 and every ({}), got {}: a build cannot take longer \
+                 than the time between builds",
+                sc.every, sc.split
+            ),
+            Some(format!("raise every to at least {}", sc.split.max(1))),
+        ));
+    }
+    if sc.interpolate
+        && let NodeSpec::DistanceField(f) = node
+    {
+        let NodeSpec::Voxelize(v) = &file.nodes[&f.boundary] else {
+            unreachable!("edges are typed")
+        };
+        if !matches!(file.nodes[&v.mesh], NodeSpec::Mesh(_)) {
+            return Err(fail(
+                "interpolate",
+                format!(
+                    "interpolate builds fields ahead of time from the mesh at a later time, but \
+                     '{}' reads '{}', a {} node computed frame by frame",
+                    f.boundary,
+                    v.mesh,
+                    file.nodes[&v.mesh].kind()
+                ),
+                Some("interpolate fields of Mesh nodes only, or use every without it".into()),
+            ));
         }
     }
     Ok(())

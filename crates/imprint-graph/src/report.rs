@@ -8,8 +8,11 @@ pub struct NodeReport {
     pub kind: String,
     /// "cpu" or "gpu".
     pub backend: String,
-    /// Frames on which the node computed (a node whose inputs did not change is not re-run).
+    /// Times the node computed or wrote (a node whose inputs did not change is not re-run;
+    /// a build split over frames counts each part).
     pub runs: u32,
+    /// The frames of those runs.
+    pub frames_run: Vec<u32>,
     pub total_ms: f64,
     pub mean_ms: f64,
     pub max_ms: f64,
@@ -25,8 +28,9 @@ fn is_zero(v: &f64) -> bool {
 }
 
 impl NodeReport {
-    pub fn record(&mut self, ms: f64) {
+    pub fn record(&mut self, frame: u32, ms: f64) {
         self.runs += 1;
+        self.frames_run.push(frame);
         self.total_ms += ms;
         self.max_ms = self.max_ms.max(ms);
         self.mean_ms = self.total_ms / self.runs as f64;

@@ -76,6 +76,9 @@ pub struct ClothNode {
     pub params: ClothParams,
     #[serde(default)]
     pub backend: Option<Backend>,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -92,6 +95,15 @@ pub struct HeightmapNode {
     pub empty: f32,
     #[serde(default)]
     pub backend: Option<Backend>,
+    /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
+    /// frame); consumers reuse the last result in between.
+    #[serde(default = "one")]
+    pub every: u32,
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 /// The x-z cells of a Heightmap node.
@@ -126,6 +138,12 @@ pub struct WriteHeightmapNode {
     /// Write every k-th frame (1 = every frame).
     #[serde(default = "one")]
     pub every: u32,
+    /// Frames written are those where (frame - offset) mod every = 0.
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 /// File formats of `WriteHeightmap`.
@@ -157,6 +175,15 @@ pub struct VoxelizeNode {
     pub variant: BoundaryVariant,
     #[serde(default)]
     pub backend: Option<Backend>,
+    /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
+    /// frame); consumers reuse the last result in between.
+    #[serde(default = "one")]
+    pub every: u32,
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 /// The grid a Voxelize node works on.
@@ -195,6 +222,24 @@ pub struct FieldNode {
     /// closest-point query per band cell).
     #[serde(default)]
     pub measure: Measure,
+    /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
+    /// frame); consumers reuse the last result in between.
+    #[serde(default = "one")]
+    pub every: u32,
+    #[serde(default)]
+    pub offset: u32,
+    /// Spread each build over this many frames (z-slabs, the same field as one build);
+    /// the result appears on the last of them. At most `every`.
+    #[serde(default = "one")]
+    pub split: u32,
+    /// Consumers see the linear blend in time of the two builds around each frame (H eq.
+    /// 13-14); builds are made `every` frames ahead, from the mesh at their own time, so the
+    /// blend adds no lag. Needs the boundary's mesh to be a `Mesh` node (a function of time).
+    #[serde(default)]
+    pub interpolate: bool,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 fn default_band() -> f32 {
@@ -228,6 +273,12 @@ pub struct WriteFieldNode {
     /// Write every k-th frame (1 = every frame).
     #[serde(default = "one")]
     pub every: u32,
+    /// Frames written are those where (frame - offset) mod every = 0.
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -243,6 +294,12 @@ pub struct WriteMeshNode {
     /// Write every k-th frame (1 = every frame).
     #[serde(default = "one")]
     pub every: u32,
+    /// Frames written are those where (frame - offset) mod every = 0.
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 /// File format of `WriteMesh`: OBJ (positions, normals, UVs where they exist) or binary PLY.
@@ -275,6 +332,12 @@ pub struct RenderNode {
     /// Render every k-th frame (1 = every frame).
     #[serde(default = "one")]
     pub every: u32,
+    /// Frames written are those where (frame - offset) mod every = 0.
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
     /// A grid of every k-th rendered frame in one PNG.
     #[serde(default)]
     pub contact_sheet: Option<ContactSheetSpec>,

@@ -30,11 +30,23 @@ use super::sampler::FieldView;
 use glam::{Vec3, Vec4};
 use imprint_core::FieldSample;
 
-/// One body: its field at the frame's start (when blending) and end.
+/// One body: two fields it blends between (when blending) and where the frame lies between
+/// them: `span` is the weight of `end` at the frame's start and end, (0, 1) when the fields
+/// are the frame's own ends, narrower when they are keyframes built around it.
 #[derive(Clone, Copy)]
 pub struct Collider<'a> {
     pub start: Option<FieldView<'a>>,
     pub end: FieldView<'a>,
+    pub span: (f32, f32),
+}
+
+impl Collider<'_> {
+    /// The weight of `end` at fraction `s` of the frame (1 at its end, exactly).
+    #[inline]
+    fn weight(&self, s: f32) -> f32 {
+        let (a, b) = self.span;
+        if s >= 1.0 { b } else { a + (b - a) * s }
+    }
 }
 
 /// A field read at a particle: signed distance (negative inside) and the outward direction.
@@ -64,7 +76,7 @@ fn classify(d: f32, v: Vec3, side: Vec4, reach: impl Fn() -> f32) -> Option<(f32
 }
 
 /// The body `c` at `x` (the particle's new position, `x_from` where it was), `s` of the way
-/// through the frame. None where the field knows no direction (far from the body, or exactly
+/// through the frame (the blend's weight is `c.span` mapped over the frame). None where the field knows no direction (far from the body, or exactly
 /// on its medial axis).
 #[inline]
 pub fn signed_sample(
@@ -85,6 +97,7 @@ pub fn signed_sample(
             band_miss,
         })
     };
+    let s = c.weight(s);
     let a = match c.start {
         Some(f0) if s < 1.0 => f0.sample(x),
         _ => return one(&b, &reach, false),

@@ -38,6 +38,15 @@ pub struct ClothState {
     pub prev: Vec<Vec4>,
 }
 
+/// A body the cloth collides with over one frame (see [`ClothSim::step_frame_between`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Body<'a> {
+    pub start: Option<&'a DistanceField>,
+    pub end: &'a DistanceField,
+    /// The weight of `end` at the frame's start and at its end.
+    pub span: (f32, f32),
+}
+
 /// Files a cloth reads: the garment mesh and the anisotropy texture (load them with
 /// [`ClothAssets::load`], or build them in memory).
 #[derive(Clone, Debug, Default)]
@@ -384,25 +393,61 @@ impl ClothSim {
         let blend = self
             .params
             .frame_blend(dt_frame, fields_start.len(), fields_end.len())?;
-        for f in fields_end
+        let bodies: Vec<Body> = fields_end
             .iter()
-            .chain(if blend { fields_start } else { &[] })
-        {
-            self.params.check_band(f.far_value(), f.band)?;
+            .enumerate()
+            .map(|(k, &end)| Body {
+                start: blend.then(|| fields_start[k]),
+                end,
+                span: (0.0, 1.0),
+            })
+            .collect();
+        self.step_frame_between(&bodies, frame, dt_frame)
+    }
+
+    /// [`ClothSim::step_frame`] with each body given as two fields and the part of the time
+    /// between them that this frame covers (a field node that builds every k frames and
+    /// interpolates gives its two builds around the frame, and the frame's span of the
+    /// blend). `start: None` reads `end` throughout; so does `blend_fields: false`.
+    pub fn step_frame_between(
+        &mut self,
+        bodies: &[Body],
+        frame: u32,
+        dt_frame: f32,
+    ) -> Result<ClothFrameMetrics> {
+        self.params.frame_blend(dt_frame, 0, bodies.len())?;
+        for b in bodies {
+            self.params.check_band(b.end.far_value(), b.end.band)?;
+            if let Some(f) = b.start.filter(|_| self.params.blend_fields) {
+                self.params.check_band(f.far_value(), f.band)?;
+            }
+            let (s0, s1) = b.span;
+            if !(s0.is_finite()
+                && s1.is_finite()
+                && (0.0..=1.0).contains(&s0)
+                && s0 <= s1
+                && s1 <= 1.0)
+            {
+                return Err(Error::Invalid(format!(
+                    "cloth: a body's span ({s0}, {s1}) must satisfy 0 <= start <= end <= 1"
+                )));
+            }
         }
-        let nf = fields_end.len();
+        let nf = bodies.len();
         if nf != self.side_fields {
             self.side = vec![Vec4::ZERO; self.len() * nf.max(1)];
             self.side_fields = nf;
         }
-        let colliders: Vec<Collider> = fields_end
+        let colliders: Vec<Collider> = bodies
             .iter()
-            .enumerate()
-            .map(|(k, &end)| Collider {
+            .map(|b| Collider {
                 // A body that did not change (the same field at both ends) needs no blend.
-                start: (blend && !std::ptr::eq(fields_start[k], end))
-                    .then(|| FieldView::new(fields_start[k])),
-                end: FieldView::new(end),
+                start: b
+                    .start
+                    .filter(|&f| self.params.blend_fields && !std::ptr::eq(f, b.end))
+                    .map(FieldView::new),
+                end: FieldView::new(b.end),
+                span: b.span,
             })
             .collect();
         self.run_frame(&colliders, frame, dt_frame)
@@ -709,6 +754,7 @@ impl ClothSim {
             .map(|&f| Collider {
                 start: None,
                 end: FieldView::new(f),
+                span: (1.0, 1.0),
             })
             .collect();
         let stats = SubstepStats {

@@ -46,7 +46,7 @@ pub mod springs;
 pub mod stability;
 pub mod texture;
 
-pub use cpu::{ClothAssets, ClothSim, ClothState};
+pub use cpu::{Body, ClothAssets, ClothSim, ClothState};
 pub use metrics::{ClothFrameMetrics, Energy};
 pub use params::{
     Anisotropy, ClothParams, Collision, Limits, Material, Pin, Shape, StiffnessMode, Wind,

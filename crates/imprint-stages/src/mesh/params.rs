@@ -39,6 +39,17 @@ pub struct MeshParams {
     /// Deformations applied in order to the fitted rest mesh, as functions of time.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub motion: Vec<Motion>,
+    /// In a pipeline, `false` switches this node and everything that reads it off.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub enabled: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 /// Puts the rest mesh's bounding box, longest side `size`, centred on `center`.

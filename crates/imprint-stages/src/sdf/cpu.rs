@@ -53,15 +53,18 @@ impl FieldBuilder {
     }
 
     pub fn build(&mut self, boundary: &Boundary, band: f32) -> Result<DistanceField> {
+        let mut build = self.start(boundary, band)?;
+        build.run_part(0, 1);
+        Ok(build.finish(self))
+    }
+
+    /// A build to run in parts (`FieldBuild::run_part`), e.g. one per frame: the same field
+    /// as [`FieldBuilder::build`], bit for bit, whatever the number of parts.
+    pub fn start(&mut self, boundary: &Boundary, band: f32) -> Result<FieldBuild> {
         validate_band(band)?;
         let spec = boundary.spec;
         spec.check_memory("distance field", 8)?;
-        let (nx, ny, nz) = (
-            spec.dims.x as usize,
-            spec.dims.y as usize,
-            spec.dims.z as usize,
-        );
-        let nxy = nx * ny;
+        let nxy = spec.dims.x as usize * spec.dims.y as usize;
         let pts: Vec<Vec3> = boundary
             .points
             .par_iter()
@@ -69,13 +72,6 @@ impl FieldBuilder {
             .collect();
         // Points are in increasing cell index, so their cell z is non-decreasing.
         let cell_z: Vec<usize> = boundary.cells.iter().map(|&c| c as usize / nxy).collect();
-        let reach = (band + 0.8661).floor() as usize;
-        let a2 = band * band;
-        // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
-        let unset = f32::from_bits(a2.to_bits() + 1);
-        let far = band * spec.cell;
-        // Bands up to WINDOW/2 - 1 cells take the fixed-window splat.
-        let fast = band <= (WINDOW / 2 - 1) as f32;
         let refine = boundary.variant == BoundaryVariant::Closest;
         // Owning triangles in grid units, for the refinement.
         let faces: Vec<[Vec3; 3]> = if refine {
@@ -87,16 +83,92 @@ impl FieldBuilder {
         } else {
             Vec::new()
         };
-
         let mut dist = self.spare_dist.take().unwrap_or_default();
         dist.resize(spec.len(), 0.0);
-        let mut nearest = self.buffer_u32(spec.len());
-        dist.par_chunks_mut(nxy * SLAB_LAYERS)
-            .zip(nearest.par_chunks_mut(nxy * SLAB_LAYERS))
+        let nearest = self.buffer_u32(spec.len());
+        let owner = refine.then(|| self.buffer_u32(spec.len()));
+        Ok(FieldBuild {
+            spec,
+            band,
+            pts,
+            cell_z,
+            faces,
+            dist,
+            nearest,
+            owner,
+            points: boundary.points.clone(),
+            world_faces: refine.then(|| boundary.faces.clone()),
+        })
+    }
+}
+
+/// A field being built in parts: each part splats the boundary points into its z-layers
+/// (and one layer more, which the next part splats again to the same values) and refines its
+/// layers, whose six neighbours are then all splatted. Cells do not depend on how the grid is
+/// cut, so any number of parts gives the same field.
+pub struct FieldBuild {
+    spec: imprint_core::GridSpec,
+    band: f32,
+    /// Boundary points in grid units, and their cells' z.
+    pts: Vec<Vec3>,
+    cell_z: Vec<usize>,
+    /// Owning triangles in grid units (refinement only).
+    faces: Vec<[Vec3; 3]>,
+    dist: Vec<f32>,
+    nearest: Vec<u32>,
+    /// The refined `nearest` (refinement only).
+    owner: Option<Vec<u32>>,
+    points: Vec<Vec3>,
+    world_faces: Option<Vec<[Vec3; 3]>>,
+}
+
+impl FieldBuild {
+    /// The z-layers of part `part` of `parts`.
+    pub fn layers(&self, part: u32, parts: u32) -> std::ops::Range<usize> {
+        let nz = self.spec.dims.z as usize;
+        let (p, n) = (part as usize, parts.max(1) as usize);
+        p * nz / n..(p + 1) * nz / n
+    }
+
+    /// Runs part `part` of `parts` (parts run in order, each once).
+    pub fn run_part(&mut self, part: u32, parts: u32) {
+        let nz = self.spec.dims.z as usize;
+        let z = self.layers(part, parts);
+        if z.is_empty() {
+            return;
+        }
+        if self.owner.is_some() {
+            self.splat(z.start..(z.end + 1).min(nz));
+            self.refine(z);
+        } else {
+            self.splat(z);
+        }
+    }
+
+    /// Phase 1 over layers `z`: per cell the strictly nearest point within the band (squared
+    /// grid distance in `dist`; world distance straight away when nothing refines it).
+    fn splat(&mut self, z: std::ops::Range<usize>) {
+        let spec = self.spec;
+        let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
+        let nxy = nx * ny;
+        let band = self.band;
+        let reach = (band + 0.8661).floor() as usize;
+        let a2 = band * band;
+        // d² <= a² exactly when d² < next_up(a²): the band includes its edge.
+        let unset = f32::from_bits(a2.to_bits() + 1);
+        let far = band * spec.cell;
+        // Bands up to WINDOW/2 - 1 cells take the fixed-window splat.
+        let fast = band <= (WINDOW / 2 - 1) as f32;
+        let refine = self.owner.is_some();
+        let (pts, cell_z) = (&self.pts, &self.cell_z);
+        let range = z.start * nxy..z.end * nxy;
+        self.dist[range.clone()]
+            .par_chunks_mut(nxy * SLAB_LAYERS)
+            .zip(self.nearest[range].par_chunks_mut(nxy * SLAB_LAYERS))
             .enumerate()
             .for_each(|(slab, (d2s, near))| {
-                let z0 = slab * SLAB_LAYERS;
-                let z1 = (z0 + SLAB_LAYERS).min(nz);
+                let z0 = z.start + slab * SLAB_LAYERS;
+                let z1 = (z0 + SLAB_LAYERS).min(z.end);
                 d2s.fill(unset);
                 near.fill(DistanceField::FAR);
                 let first = cell_z.partition_point(|&z| z + reach < z0);
@@ -117,42 +189,61 @@ impl FieldBuilder {
                     }
                 }
             });
-        let nearest = if refine {
-            let mut owner = self.buffer_u32(spec.len());
-            refine_to_faces(
-                &mut dist,
-                &nearest,
-                &mut owner,
-                &faces,
-                (nx, ny, nz),
-                spec.cell,
-                far,
-            );
-            self.spare.push(nearest);
-            owner
-        } else {
-            nearest
+    }
+
+    /// Phase 2 over layers `z` (their neighbours splatted): see [`refine_to_faces`].
+    fn refine(&mut self, z: std::ops::Range<usize>) {
+        let spec = self.spec;
+        let dims = (
+            spec.dims.x as usize,
+            spec.dims.y as usize,
+            spec.dims.z as usize,
+        );
+        let nxy = dims.0 * dims.1;
+        let owner = self.owner.as_mut().expect("refining builds have owners");
+        refine_to_faces(
+            &mut self.dist[z.start * nxy..z.end * nxy],
+            &self.nearest,
+            &mut owner[z.start * nxy..z.end * nxy],
+            z.start * nxy,
+            &self.faces,
+            dims,
+            spec.cell,
+            self.band * spec.cell,
+        );
+    }
+
+    /// The field (after every part ran); the splat's buffer goes back to `builder`.
+    pub fn finish(self, builder: &mut FieldBuilder) -> DistanceField {
+        let nearest = match self.owner {
+            Some(owner) => {
+                builder.spare.push(self.nearest);
+                owner
+            }
+            None => self.nearest,
         };
-        Ok(DistanceField {
-            spec,
-            band,
-            dist,
+        DistanceField {
+            spec: self.spec,
+            band: self.band,
+            dist: self.dist,
             nearest,
-            points: Arc::new(boundary.points.clone()),
-            faces: refine.then(|| Arc::new(boundary.faces.clone())),
+            points: Arc::new(self.points),
+            faces: self.world_faces.map(Arc::new),
             cells: Default::default(),
-        })
+        }
     }
 }
 
 /// The refinement pass: per band cell, the exact distance to the best owning triangle among
 /// its nearest point's and its six neighbours' nearest points'. Writes the new `nearest`
 /// in `owner` (the point whose triangle won; ties to the smaller index) and writes world
-/// distances.
+/// distances. `dist` and `owner` are the layers starting at cell `offset`.
+#[allow(clippy::too_many_arguments)]
 fn refine_to_faces(
     dist: &mut [f32],
     nearest: &[u32],
     owner: &mut [u32],
+    offset: usize,
     faces: &[[Vec3; 3]],
     (nx, ny, nz): (usize, usize, usize),
     cell: f32,
@@ -163,7 +254,7 @@ fn refine_to_faces(
         .zip(owner.par_chunks_mut(nxy * SLAB_LAYERS))
         .enumerate()
         .for_each(|(slab, (dist, owner))| {
-            let base = slab * nxy * SLAB_LAYERS;
+            let base = offset + slab * nxy * SLAB_LAYERS;
             for k in 0..dist.len() {
                 let i = base + k;
                 let n0 = nearest[i];
