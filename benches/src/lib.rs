@@ -2,6 +2,7 @@
 
 pub mod cloth;
 pub mod render;
+pub mod schedule;
 
 use imprint_core::{DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;

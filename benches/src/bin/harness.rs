@@ -23,7 +23,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 5] = [
+const SECTIONS: [(&str, &str); 6] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -35,6 +35,7 @@ const SECTIONS: [(&str, &str); 5] = [
     ("gpu", "the GPU voxelise + field path"),
     ("render", "frames and depth maps, CPU and GPU"),
     ("cloth", "the cloth against Taichi, and H's bunny scene"),
+    ("schedule", "schedules: H Table 1 columns (c) and (d)"),
 ];
 
 fn main() {
@@ -81,6 +82,7 @@ fn main() {
             "gpu" => format!("## 4. GPU path\n\n{}", gpu_table(&root, repeat)),
             "render" => imprint_benches::render::section(&root, repeat),
             "cloth" => imprint_benches::cloth::section(&root, repeat),
+            "schedule" => imprint_benches::schedule::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(

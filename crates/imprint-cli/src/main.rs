@@ -13,6 +13,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+mod sweep;
+
 #[derive(Parser)]
 #[command(
     name = "imprint",
@@ -75,6 +77,9 @@ enum Command {
         #[arg(long, default_value = "out")]
         out: PathBuf,
     },
+    /// Run a pipeline over a grid of settings; time and error of each against a reference:
+    /// DIR/sweep.csv, sweep.md, sweep.png (time against error, Pareto front marked).
+    Sweep(sweep::SweepArgs),
     /// Stability map of a pipeline's Cloth node: stiffness multipliers × substep over the
     /// estimated critical step; each cell runs the cloth (perturbed, no colliders) and says
     /// whether it stayed stable or blew up.
@@ -196,6 +201,7 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             print!("{}", plan.dot());
             Ok(())
         }
+        Command::Sweep(args) => sweep::sweep(&args),
         Command::Stress {
             what: StressWhat::Cloth,
             file,

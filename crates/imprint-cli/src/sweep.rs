@@ -1,0 +1,851 @@
+//! `imprint sweep`: one pipeline over a grid of settings, every run timed and compared with a
+//! reference run, written as `sweep.csv`, `sweep.md` and `sweep.png` (time against error).
+//!
+//! - `--vary NODE.FIELD=v1,v2,…` (repeatable; values in RON, split at top-level commas): every
+//!   combination runs, in the order given (the first `--vary` changes slowest).
+//! - `--reference NODE.FIELD=v` (repeatable): the reference is the file with these overrides
+//!   (and `--set`); without any, the file as it is. Its numbers are cached under
+//!   `DIR/reference/<key>/`, the key a hash of the pipeline text after the overrides, the
+//!   frame range, the backend and the imprint version, so a second sweep reuses it.
+//! - Each setting runs with its writers into `DIR/runs/<setting>/`; the reference's into its
+//!   cache folder.
+//!
+//! The CSV and the Markdown table hold the same rows: the reference first (setting `ref`, zero
+//! error by definition), then one per combination. Only the timing columns (`frame_ms_*`,
+//! `*_ms_per_frame`) and `pareto` change between two sweeps of the same inputs.
+
+mod measure;
+mod plot;
+
+use imprint_core::io::atomic_write_bytes;
+use imprint_graph::exec::{RunOptions, run_observed};
+use imprint_graph::schema::Backend;
+use imprint_graph::{Error, Plan, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use measure::{Cache, Comparer, FrameError, Recorder, Reference, Timing, TrackKind};
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::ops::Range;
+use std::path::PathBuf;
+
+/// What `imprint sweep` takes.
+#[derive(clap::Args)]
+pub struct SweepArgs {
+    file: PathBuf,
+    /// A field to vary and its values: NODE.FIELD=V1,V2,… (RON, split at top-level commas);
+    /// repeatable: every combination runs, the first --vary changing slowest.
+    #[arg(long, value_name = "NODE.FIELD=V1,V2,…", required = true)]
+    vary: Vec<String>,
+    /// The reference's setting: NODE.FIELD=VALUE, repeatable (none: the file as it is).
+    #[arg(long, value_name = "NODE.FIELD=VALUE")]
+    reference: Vec<String>,
+    /// Override for every run, the reference's included: NODE.FIELD=VALUE, repeatable.
+    #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
+    sets: Vec<String>,
+    /// Output folder; the reference's cache goes under DIR/reference/, each setting's
+    /// files under DIR/runs/.
+    #[arg(long, default_value = "out/sweep")]
+    out: PathBuf,
+    /// Frames every run runs, `A..B` (B exclusive) or `A..=B`.
+    #[arg(long, value_parser = crate::parse_frames)]
+    frames: Option<Range<u32>>,
+    /// Overrides the backend of the file and of every node, in every run.
+    #[arg(long, value_enum)]
+    backend: Option<crate::BackendArg>,
+    /// The error plotted and ranked (the Pareto column): NODE or NODE.STAT, STAT one of
+    /// mean, rms, max. Default: the last node in the pipeline's order with an error metric
+    /// (DistanceField, Cloth, Heightmap); a cloth's max, the others' rms.
+    #[arg(long, value_name = "NODE[.STAT]")]
+    error: Option<String>,
+}
+
+/// One `--vary` (or, with one value, `--reference`): a node's field and its values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vary {
+    pub path: String,
+    pub values: Vec<String>,
+}
+
+fn invalid(msg: String) -> Error {
+    imprint_core::Error::Invalid(msg).into()
+}
+
+/// Splits at commas outside brackets and strings: `1,(2, 3),"a,b"` → `1`, `(2, 3)`, `"a,b"`.
+fn split_top_level(s: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let (mut depth, mut in_str, mut escaped) = (0i32, false, false);
+    for c in s.chars() {
+        if in_str {
+            in_str = escaped || c != '"';
+            escaped = !escaped && c == '\\';
+        } else {
+            match c {
+                '"' => in_str = true,
+                '(' | '[' | '{' => depth += 1,
+                ')' | ']' | '}' => depth -= 1,
+                ',' if depth == 0 => {
+                    out.push(cur.trim().to_string());
+                    cur.clear();
+                    continue;
+                }
+                _ => {}
+            }
+        }
+        cur.push(c);
+    }
+    out.push(cur.trim().to_string());
+    out
+}
+
+/// Parses `NODE.FIELD[.FIELD…]=v1,v2,…` given to `flag`.
+pub fn parse_vary(flag: &str, s: &str) -> Result<Vary> {
+    let usage = || {
+        invalid(format!(
+            "{flag} {s}: expected NODE.FIELD=VALUE[,VALUE…] (a node name, a dot, a field; \
+             values in RON, separated by commas)"
+        ))
+    };
+    let (path, values) = s.split_once('=').ok_or_else(usage)?;
+    let path = path.trim();
+    if path.split('.').count() < 2 || path.split('.').any(|p| p.trim().is_empty()) {
+        return Err(usage());
+    }
+    let values = split_top_level(values);
+    if values.iter().any(String::is_empty) {
+        return Err(invalid(format!(
+            "{flag} {s}: an empty value (two commas in a row, or one at either end)"
+        )));
+    }
+    for (i, v) in values.iter().enumerate() {
+        if values[..i].contains(v) {
+            return Err(invalid(format!(
+                "{flag} {s}: the value {v} is listed twice"
+            )));
+        }
+    }
+    Ok(Vary {
+        path: path.to_string(),
+        values,
+    })
+}
+
+/// Every combination of the values, as `NODE.FIELD=VALUE` overrides; the first `Vary`
+/// changes slowest.
+pub fn combinations(vary: &[Vary]) -> Vec<Vec<String>> {
+    let mut out = vec![Vec::new()];
+    for v in vary {
+        out = out
+            .into_iter()
+            .flat_map(|prefix: Vec<String>| {
+                v.values.iter().map(move |value| {
+                    let mut c = prefix.clone();
+                    c.push(format!("{}={value}", v.path));
+                    c
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+/// Refuses a field given twice, and a node the pipeline does not have.
+fn check_paths(flag: &str, vary: &[Vary], plan: &Plan) -> Result<()> {
+    for (i, v) in vary.iter().enumerate() {
+        if vary[..i].iter().any(|w| w.path == v.path) {
+            return Err(invalid(format!("{flag} {}: given twice", v.path)));
+        }
+        let node = v.path.split('.').next().unwrap_or_default();
+        if !plan.file.nodes.contains_key(node) {
+            let names: Vec<&str> = plan.file.nodes.keys().map(String::as_str).collect();
+            return Err(invalid(format!(
+                "{flag} {}: the pipeline has no node named '{node}' (its nodes: {})",
+                v.path,
+                names.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Loads the file with `overrides` after `--set`, saying which setting is wrong if it is.
+fn load_setting(args: &SweepArgs, what: &str, overrides: &[String]) -> Result<Plan> {
+    let all: Vec<String> = args.sets.iter().chain(overrides).cloned().collect();
+    imprint_graph::load(&args.file, &all).inspect_err(|_| {
+        let how = if overrides.is_empty() {
+            String::new()
+        } else {
+            format!(" (`{}`)", overrides.join(" "))
+        };
+        eprintln!("error: {what}{how}: the pipeline it makes is invalid:");
+    })
+}
+
+/// One row of the results.
+struct Row {
+    /// `ref`, or the setting's number from 1.
+    id: String,
+    /// The overrides that make this setting.
+    overrides: Vec<String>,
+    /// `ok`, or why the run failed or what could not be compared.
+    status: String,
+    timing: Option<Timing>,
+    errors: BTreeMap<String, Vec<FrameError>>,
+}
+
+impl Row {
+    /// Overall (mean, RMS, max) error of `node`.
+    fn error(&self, node: &str) -> Option<[f64; 3]> {
+        self.errors
+            .get(node)
+            .and_then(|f| FrameError::total(f).stats())
+    }
+}
+
+/// The error of the plot and of the Pareto front: one node's mean, RMS or max.
+struct Primary {
+    node: String,
+    kind: TrackKind,
+    /// 0 mean, 1 RMS, 2 max.
+    stat: usize,
+}
+
+const STATS: [&str; 3] = ["mean", "rms", "max"];
+
+/// The kind of error a node of this kind has, if any.
+fn track_kind(node_kind: &str) -> Option<TrackKind> {
+    match node_kind {
+        "DistanceField" => Some(TrackKind::Field),
+        "Cloth" => Some(TrackKind::Cloth),
+        "Heightmap" => Some(TrackKind::Heights),
+        _ => None,
+    }
+}
+
+impl Primary {
+    /// `--error NODE[.STAT]`, or the last node of the reference's run with an error metric
+    /// (a cloth's max, the others' RMS); `None` when no node has one.
+    fn choose(arg: Option<&str>, plan: &Plan) -> Result<Option<Primary>> {
+        let default_stat = |kind| if kind == TrackKind::Cloth { 2 } else { 1 };
+        let Some(arg) = arg else {
+            return Ok(plan.order.iter().rev().find_map(|n| {
+                let kind = track_kind(plan.file.nodes[n].kind())?;
+                Some(Primary {
+                    node: n.clone(),
+                    kind,
+                    stat: default_stat(kind),
+                })
+            }));
+        };
+        let (node, stat) = match arg.rsplit_once('.') {
+            Some((node, stat)) => {
+                let i = STATS.iter().position(|s| *s == stat).ok_or_else(|| {
+                    invalid(format!(
+                        "--error {arg}: '{stat}' is not one of mean, rms, max"
+                    ))
+                })?;
+                (node, Some(i))
+            }
+            None => (arg, None),
+        };
+        let kind = plan
+            .file
+            .nodes
+            .get(node)
+            .and_then(|n| track_kind(n.kind()))
+            .filter(|_| plan.order.iter().any(|o| o == node))
+            .ok_or_else(|| {
+                invalid(format!(
+                    "--error {arg}: '{node}' is not a DistanceField, Cloth or Heightmap node \
+                     that the reference runs"
+                ))
+            })?;
+        Ok(Some(Primary {
+            node: node.to_string(),
+            kind,
+            stat: stat.unwrap_or(default_stat(kind)),
+        }))
+    }
+
+    fn describe(&self) -> String {
+        let kind = match self.kind {
+            TrackKind::Field => "field",
+            TrackKind::Cloth => "cloth",
+            TrackKind::Heights => "height field",
+        };
+        let stat = ["mean", "RMS", "max"][self.stat];
+        format!("{kind} '{}': {stat} {}", self.node, self.kind.describe())
+    }
+
+    fn column(&self) -> String {
+        stat_column(&self.node, self.kind, STATS[self.stat])
+    }
+}
+
+fn stat_column(node: &str, kind: TrackKind, stat: &str) -> String {
+    format!("{node}_{}_{stat}{}", kind.quantity(), kind.unit_suffix())
+}
+
+/// Runs the sweep; writes DIR/sweep.{csv,md,png} and DIR/sweep_frames.csv.
+pub fn sweep(args: &SweepArgs) -> Result<()> {
+    let vary: Vec<Vary> = args
+        .vary
+        .iter()
+        .map(|s| parse_vary("--vary", s))
+        .collect::<Result<_>>()?;
+    let reference: Vec<Vary> = args
+        .reference
+        .iter()
+        .map(|s| parse_vary("--reference", s))
+        .collect::<Result<_>>()?;
+    if let Some(r) = reference.iter().find(|r| r.values.len() != 1) {
+        return Err(invalid(format!(
+            "--reference {}: one value only (got {})",
+            r.path,
+            r.values.join(", ")
+        )));
+    }
+    let base = imprint_graph::load(&args.file, &args.sets)?;
+    check_paths("--vary", &vary, &base)?;
+    check_paths("--reference", &reference, &base)?;
+
+    // Every setting is checked before anything runs.
+    let ref_overrides: Vec<String> = reference
+        .iter()
+        .map(|r| format!("{}={}", r.path, r.values[0]))
+        .collect();
+    let ref_plan = load_setting(args, "the reference", &ref_overrides)?;
+    let combos = combinations(&vary);
+    let plans: Vec<Plan> = combos
+        .iter()
+        .enumerate()
+        .map(|(i, c)| load_setting(args, &format!("setting {}", i + 1), c))
+        .collect::<Result<_>>()?;
+    let primary = Primary::choose(args.error.as_deref(), &ref_plan)?;
+    let frames = args.frames.clone().unwrap_or(0..ref_plan.file.frames);
+    if frames.is_empty() || frames.end > ref_plan.file.frames {
+        return Err(invalid(format!(
+            "--frames {}..{} is outside the pipeline's 0..{}",
+            frames.start, frames.end, ref_plan.file.frames
+        )));
+    }
+
+    let backend_override: Option<Backend> = args.backend.map(Into::into);
+    let backend = backend_override.map_or_else(|| "file".to_string(), |b| format!("{b:?}"));
+    let cache = Cache::new(&args.out.join("reference"), &ref_plan, &frames, &backend);
+    let cached = match cache.load() {
+        Ok(r) => r,
+        Err(why) => {
+            println!("reference: the cache cannot be used ({why}); running it again");
+            None
+        }
+    };
+    let bar = progress_bar((combos.len() + usize::from(cached.is_none())) as u64);
+    let opts = |out: PathBuf| RunOptions {
+        out,
+        frames: Some(frames.clone()),
+        backend: backend_override,
+    };
+    let reference = match cached {
+        Some(r) => {
+            println!(
+                "reference: reusing the cached run in {} (same pipeline text, frames and \
+                 backend; delete it to run the reference again)",
+                cache.dir.display()
+            );
+            r
+        }
+        None => {
+            say(
+                &bar,
+                format!(
+                    "reference: running it ({}), cached in {}",
+                    label(&ref_overrides, "the file as it is"),
+                    cache.dir.display()
+                ),
+            );
+            let mut rec = Recorder::new(&ref_plan, &frames);
+            let report = run_observed(
+                &ref_plan,
+                &opts(cache.dir.join("run")),
+                &mut frame_progress(&bar, "reference"),
+                Some(&mut rec),
+            )?;
+            let r = rec.finish(&report);
+            cache.save(&ref_plan.source.name, &r)?;
+            bar.inc(1);
+            r
+        }
+    };
+
+    let mut rows = vec![Row {
+        id: "ref".into(),
+        overrides: ref_overrides.clone(),
+        status: "ok".into(),
+        timing: Some(reference.timing.clone()),
+        errors: reference.zero_errors(),
+    }];
+    let width = combos.len().to_string().len();
+    for (i, (overrides, plan)) in combos.iter().zip(&plans).enumerate() {
+        let id = format!("{:0width$}", i + 1);
+        let what = label(overrides, "");
+        let mut cmp = Comparer::new(&reference, &frames);
+        let run = run_observed(
+            plan,
+            &opts(args.out.join("runs").join(&id)),
+            &mut frame_progress(&bar, &what),
+            Some(&mut cmp),
+        );
+        let row = match run {
+            Ok(report) => Row {
+                status: if cmp.notes.is_empty() {
+                    "ok".into()
+                } else {
+                    cmp.notes.iter().cloned().collect::<Vec<_>>().join("; ")
+                },
+                timing: Some(cmp.timing(&report, plan)),
+                errors: std::mem::take(&mut cmp.errors),
+                id,
+                overrides: overrides.clone(),
+            },
+            Err(e) => Row {
+                status: format!("failed: {e}"),
+                timing: None,
+                errors: BTreeMap::new(),
+                id,
+                overrides: overrides.clone(),
+            },
+        };
+        say(
+            &bar,
+            format!("[{}/{}] {what}: {}", i + 1, combos.len(), summary(&row)),
+        );
+        rows.push(row);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let pareto = pareto_of(&rows, primary.as_ref());
+    let table = results_table(&rows, &vary, &reference, &ref_plan, &pareto);
+    let out = &args.out;
+    atomic_write_bytes(&out.join("sweep.csv"), table.csv().as_bytes())?;
+    atomic_write_bytes(&out.join("sweep_frames.csv"), frames_csv(&rows).as_bytes())?;
+    let md = markdown(args, &ref_overrides, &frames, primary.as_ref(), &table);
+    atomic_write_bytes(&out.join("sweep.md"), md.as_bytes())?;
+    match &primary {
+        Some(p) => {
+            let points = plot_points(&rows, p, &vary, &pareto);
+            let name = args.file.file_name().map_or_else(
+                || args.file.display().to_string(),
+                |n| n.to_string_lossy().into(),
+            );
+            plot::write_plot(
+                &out.join("sweep.png"),
+                &format!("imprint sweep {name}: time against error"),
+                &p.describe(),
+                &points,
+            )?;
+        }
+        None => println!(
+            "no node with an error metric (DistanceField, Cloth, Heightmap) ran: sweep.png not \
+             written"
+        ),
+    }
+    print!("{md}");
+    println!(
+        "wrote {}, {}, {} and {}",
+        out.join("sweep.csv").display(),
+        out.join("sweep.md").display(),
+        out.join("sweep.png").display(),
+        out.join("sweep_frames.csv").display()
+    );
+    let failed: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.timing.is_none())
+        .map(|r| r.id.as_str())
+        .collect();
+    if !failed.is_empty() {
+        return Err(imprint_core::Error::Run(format!(
+            "{} of {} settings failed (setting {}); the status column says why",
+            failed.len(),
+            combos.len(),
+            failed.join(", ")
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// A setting for people: its overrides, or `empty` when there are none.
+fn label(overrides: &[String], empty: &str) -> String {
+    if overrides.is_empty() {
+        empty.to_string()
+    } else {
+        overrides.join(" ")
+    }
+}
+
+/// One line per finished setting.
+fn summary(row: &Row) -> String {
+    let Some(t) = &row.timing else {
+        return row.status.clone();
+    };
+    let mut s = format!("{:.2} ms/frame", t.mean_ms());
+    for node in row.errors.keys() {
+        if let Some([_, rms, max]) = row.error(node) {
+            s += &format!(", {node} error rms {rms:.4} max {max:.4}");
+        }
+    }
+    s
+}
+
+/// The bar over settings (hidden when stderr is not a terminal).
+fn progress_bar(len: u64) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+    }
+    ProgressBar::new(len).with_style(
+        ProgressStyle::with_template(
+            "{spinner} setting {pos}/{len} [{bar:30}] {elapsed} ETA {eta}  {msg}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    )
+}
+
+/// A line on stdout, above the bar (`ProgressBar::println` says nothing when it is hidden).
+fn say(bar: &ProgressBar, line: String) {
+    bar.suspend(|| println!("{line}"));
+}
+
+/// Shows the setting and its frame on the bar.
+fn frame_progress<'a>(bar: &'a ProgressBar, what: &'a str) -> impl FnMut(u32, u32) + 'a {
+    move |done, total| bar.set_message(format!("{what}: frame {done}/{total}"))
+}
+
+/// Which rows are on the Pareto front of (mean frame time, primary error).
+fn pareto_of(rows: &[Row], primary: Option<&Primary>) -> Vec<bool> {
+    let Some(p) = primary else {
+        return vec![false; rows.len()];
+    };
+    let pts: Vec<Option<(f64, f64)>> = rows
+        .iter()
+        .map(|r| Some((r.timing.as_ref()?.mean_ms(), r.error(&p.node)?[p.stat])))
+        .collect();
+    let valid: Vec<(f64, f64)> = pts.iter().flatten().copied().collect();
+    let mut front = plot::pareto_front(&valid).into_iter();
+    pts.iter()
+        .map(|p| p.is_some() && front.next().unwrap_or(false))
+        .collect()
+}
+
+/// A point's label on the plot: the varied values, by field name where that is unambiguous.
+fn plot_points(rows: &[Row], p: &Primary, vary: &[Vary], pareto: &[bool]) -> Vec<plot::Point> {
+    let short = |path: &str| {
+        let last = path.rsplit('.').next().unwrap_or(path);
+        let unique = vary
+            .iter()
+            .filter(|v| v.path.ends_with(&format!(".{last}")))
+            .count()
+            == 1;
+        if unique {
+            last.to_string()
+        } else {
+            path.to_string()
+        }
+    };
+    rows.iter()
+        .zip(pareto)
+        .filter_map(|(r, &on_front)| {
+            let error = r.error(&p.node)?[p.stat];
+            let label = if r.id == "ref" {
+                "reference".to_string()
+            } else {
+                r.overrides
+                    .iter()
+                    .map(|o| {
+                        let (path, value) = o.split_once('=').unwrap_or((o, ""));
+                        format!("{}={value}", short(path))
+                    })
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
+            Some(plot::Point {
+                time_ms: r.timing.as_ref()?.mean_ms(),
+                error,
+                label,
+                reference: r.id == "ref",
+                pareto: on_front,
+            })
+        })
+        .collect()
+}
+
+/// A table cell: numbers are formatted per output (CSV: exact; Markdown: short).
+enum Cell {
+    Text(String),
+    Ms(f64),
+    Count(u64),
+    Error(f64),
+    Empty,
+}
+
+struct Table {
+    headers: Vec<String>,
+    rows: Vec<Vec<Cell>>,
+}
+
+fn csv_escape(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// About four significant digits.
+fn short_number(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if (1e-3..1e4).contains(&v.abs()) {
+        let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+impl Table {
+    fn csv(&self) -> String {
+        let mut s = self.headers.join(",") + "\n";
+        for row in &self.rows {
+            let cells: Vec<String> = row
+                .iter()
+                .map(|c| match c {
+                    Cell::Text(t) => csv_escape(t),
+                    Cell::Ms(v) => format!("{v:.3}"),
+                    Cell::Count(n) => n.to_string(),
+                    Cell::Error(v) => format!("{v:.6e}"),
+                    Cell::Empty => String::new(),
+                })
+                .collect();
+            s += &(cells.join(",") + "\n");
+        }
+        s
+    }
+
+    fn markdown(&self) -> String {
+        let mut s = format!("| {} |\n", self.headers.join(" | "));
+        s += &format!("|{}\n", "---|".repeat(self.headers.len()));
+        for row in &self.rows {
+            let cells: Vec<String> = row
+                .iter()
+                .map(|c| match c {
+                    Cell::Text(t) => t.replace('|', "\\|").replace('\n', " "),
+                    Cell::Ms(v) => format!("{v:.2}"),
+                    Cell::Count(n) => n.to_string(),
+                    Cell::Error(v) => short_number(*v),
+                    Cell::Empty => String::new(),
+                })
+                .collect();
+            s += &format!("| {} |\n", cells.join(" | "));
+        }
+        s
+    }
+}
+
+/// The rows of `sweep.csv` / `sweep.md`.
+fn results_table(
+    rows: &[Row],
+    vary: &[Vary],
+    reference: &Reference,
+    ref_plan: &Plan,
+    pareto: &[bool],
+) -> Table {
+    // Nodes timed: the reference's, then any only a setting ran, in the order first seen.
+    let mut nodes: Vec<String> = Vec::new();
+    for t in rows.iter().filter_map(|r| r.timing.as_ref()) {
+        for (n, ..) in &t.nodes {
+            if !nodes.contains(n) {
+                nodes.push(n.clone());
+            }
+        }
+    }
+    let mut tracks: Vec<(&str, TrackKind)> = reference
+        .tracks
+        .iter()
+        .map(|t| (t.node.as_str(), t.kind))
+        .collect();
+    tracks.sort_by_key(|(n, _)| ref_plan.order.iter().position(|o| o == n));
+    let mut headers = vec!["setting".to_string()];
+    headers.extend(vary.iter().map(|v| v.path.clone()));
+    headers.extend(["status", "frame_ms_mean", "frame_ms_p95", "frame_ms_max"].map(String::from));
+    for n in &nodes {
+        headers.push(format!("{n}_ms_per_frame"));
+        headers.push(format!("{n}_runs"));
+    }
+    for (n, kind) in &tracks {
+        for stat in STATS {
+            headers.push(stat_column(n, *kind, stat));
+        }
+    }
+    headers.push("pareto".into());
+
+    let body = rows
+        .iter()
+        .zip(pareto)
+        .map(|(r, &on_front)| {
+            let mut cells = vec![Cell::Text(r.id.clone())];
+            for v in vary {
+                let prefix = format!("{}=", v.path);
+                cells.push(
+                    r.overrides
+                        .iter()
+                        .find_map(|o| o.strip_prefix(&prefix))
+                        .map_or(Cell::Empty, |value| Cell::Text(value.to_string())),
+                );
+            }
+            cells.push(Cell::Text(r.status.clone()));
+            match &r.timing {
+                Some(t) => {
+                    cells.extend([t.mean_ms(), t.p95_ms(), t.max_ms()].map(Cell::Ms));
+                    let per_frame = t.frame_ms.len().max(1) as f64;
+                    for n in &nodes {
+                        match t.nodes.iter().find(|(m, ..)| m == n) {
+                            Some((_, runs, total)) => {
+                                cells.push(Cell::Ms(total / per_frame));
+                                cells.push(Cell::Count(u64::from(*runs)));
+                            }
+                            None => cells.extend([Cell::Empty, Cell::Empty]),
+                        }
+                    }
+                }
+                None => cells.extend((0..3 + 2 * nodes.len()).map(|_| Cell::Empty)),
+            }
+            for (n, _) in &tracks {
+                match r.error(n) {
+                    Some(stats) => cells.extend(stats.map(Cell::Error)),
+                    None => cells.extend((0..3).map(|_| Cell::Empty)),
+                }
+            }
+            cells.push(Cell::Text(if on_front { "yes" } else { "" }.into()));
+            cells
+        })
+        .collect();
+    Table {
+        headers,
+        rows: body,
+    }
+}
+
+/// `sweep_frames.csv`: every setting's error per node per frame.
+fn frames_csv(rows: &[Row]) -> String {
+    let mut s = String::from("setting,node,frame,probes,mean,rms,max\n");
+    for r in rows {
+        for (node, frames) in &r.errors {
+            for f in frames {
+                let stats = f.stats().map_or_else(
+                    || ",,".to_string(),
+                    |[a, b, c]| format!("{a:.6e},{b:.6e},{c:.6e}"),
+                );
+                s += &format!("{},{node},{},{},{stats}\n", r.id, f.frame, f.n);
+            }
+        }
+    }
+    s
+}
+
+fn markdown(
+    args: &SweepArgs,
+    ref_overrides: &[String],
+    frames: &Range<u32>,
+    primary: Option<&Primary>,
+    table: &Table,
+) -> String {
+    let mut s = format!("# imprint sweep: {}\n\n", args.file.display());
+    s += &format!(
+        "- frames {}..{}{}\n",
+        frames.start,
+        frames.end,
+        args.backend
+            .map_or_else(String::new, |b| format!(", backend {:?}", Backend::from(b)))
+    );
+    if !args.sets.is_empty() {
+        s += &format!("- every run: `--set {}`\n", args.sets.join(" --set "));
+    }
+    s += &format!(
+        "- reference (row `ref`): {}\n",
+        label(ref_overrides, "the file as it is")
+    );
+    if let Some(p) = primary {
+        s += &format!(
+            "- plotted error (`sweep.png`, `pareto`): {} (`{}`)\n",
+            p.describe(),
+            p.column()
+        );
+    }
+    s += "- errors: fields in reference cells at probe points in the reference's band; cloth \
+          and height fields in world units; mean, RMS and max over all frames \
+          (`sweep_frames.csv`: per frame)\n\n";
+    s + &table.markdown()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_split_at_top_level_commas_only() {
+        assert_eq!(
+            split_top_level(r#"1, (2, 3),"a,\"b",[4,5]"#),
+            ["1", "(2, 3)", r#""a,\"b""#, "[4,5]"]
+        );
+    }
+
+    #[test]
+    fn vary_parses_and_refuses_what_it_cannot_use() {
+        let v = parse_vary("--vary", "vox.grid.resolution=16,24").unwrap();
+        assert_eq!(v.path, "vox.grid.resolution");
+        assert_eq!(v.values, ["16", "24"]);
+        for bad in [
+            "field",
+            "field=1,2",
+            ".band=1",
+            "field.=1",
+            "field.band=1,,2",
+            "a.b=1,1",
+        ] {
+            let e = parse_vary("--vary", bad).unwrap_err();
+            assert_eq!(e.exit_code(), 2, "{bad}");
+            assert!(e.to_string().contains(bad), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn combinations_follow_the_order_given() {
+        let v = [
+            Vary {
+                path: "a.x".into(),
+                values: vec!["1".into(), "2".into()],
+            },
+            Vary {
+                path: "b.y".into(),
+                values: vec!["p".into(), "q".into(), "r".into()],
+            },
+        ];
+        let c = combinations(&v);
+        assert_eq!(c.len(), 6);
+        assert_eq!(c[0], ["a.x=1", "b.y=p"]);
+        assert_eq!(c[1], ["a.x=1", "b.y=q"]);
+        assert_eq!(c[5], ["a.x=2", "b.y=r"]);
+    }
+
+    #[test]
+    fn numbers_and_text_are_escaped_per_format() {
+        assert_eq!(csv_escape("(1, 2)"), "\"(1, 2)\"");
+        assert_eq!(csv_escape("a\"b"), "\"a\"\"b\"");
+        assert_eq!(short_number(0.0123456), "0.01235");
+        assert_eq!(short_number(123.456), "123.5");
+        assert_eq!(short_number(1.5e-6), "1.500e-6");
+    }
+}
