@@ -189,6 +189,9 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             sets,
         } => {
             let plan = imprint_graph::load(&file, &sets)?;
+            for w in &plan.warnings {
+                eprintln!("warning: {w}");
+            }
             run_plan(&plan, out, frames, backend.map(Into::into))
         }
         Command::Check { file, sets } => {
@@ -394,24 +397,30 @@ fn describe(plan: &Plan) -> String {
         "{}: valid. {} frame(s) at {} fps, backend {:?}, seed {}\n\nwill run (in order; Auto = a hardware GPU if there is one, else the CPU):\n",
         plan.source.name, f.frames, f.fps, f.backend, f.seed
     );
-    let statics = static_nodes(plan);
+    let statics = plan.static_nodes();
     for name in &plan.order {
         let node = &f.nodes[name];
+        let sc = node.schedule();
         let when = if node.is_writer() {
-            match node {
-                imprint_graph::schema::NodeSpec::WriteField(w) if w.every > 1 => {
-                    format!("every {} frames", w.every)
-                }
-                imprint_graph::schema::NodeSpec::WriteMesh(w) if w.every > 1 => {
-                    format!("every {} frames", w.every)
-                }
-                imprint_graph::schema::NodeSpec::Render(r) if r.every > 1 => {
-                    format!("every {} frames", r.every)
-                }
-                _ => "every frame".into(),
+            if sc.every > 1 {
+                format!("every {} frames (offset {})", sc.every, sc.offset)
+            } else {
+                "every frame".into()
             }
         } else if statics.contains(name) {
             "frame 0 only (inputs never change; reused after)".into()
+        } else if sc.every > 1 || sc.split > 1 {
+            format!(
+                "every {} (offset {}){}{}",
+                sc.every,
+                sc.offset,
+                if sc.split > 1 {
+                    format!(", split {}", sc.split)
+                } else {
+                    String::new()
+                },
+                if sc.interpolate { ", interpolated" } else { "" }
+            )
         } else {
             "every frame".into()
         };
@@ -453,6 +462,14 @@ fn describe(plan: &Plan) -> String {
             }
         }
     }
+    s += &format!(
+        "\nschedule (first {} frames):\n{}",
+        plan.file.frames.min(24),
+        plan.schedule_table(24)
+    );
+    for w in &plan.warnings {
+        s += &format!("\nwarning: {w}\n");
+    }
     if plan.pruned.is_empty() {
         s += "\npruned: none\n";
     } else {
@@ -462,28 +479,4 @@ fn describe(plan: &Plan) -> String {
         }
     }
     s
-}
-
-/// Nodes whose every upstream mesh is static: they compute once.
-fn static_nodes(plan: &Plan) -> Vec<String> {
-    let mut out: Vec<String> = Vec::new();
-    for name in &plan.order {
-        let node = &plan.file.nodes[name];
-        let is_static = match node {
-            imprint_graph::schema::NodeSpec::Mesh(m) => {
-                m.motion.iter().all(|mo| mo.is_time_invariant())
-            }
-            _ => {
-                !node.inputs().is_empty()
-                    && node
-                        .inputs()
-                        .iter()
-                        .all(|(_, i, _)| out.iter().any(|o| o == i))
-            }
-        };
-        if is_static {
-            out.push(name.clone());
-        }
-    }
-    out
 }

@@ -703,3 +703,48 @@ fn gpu_cloth_agrees_with_cpu_through_the_pipeline() {
         .fold(0.0, f32::max);
     assert!(worst < 1e-4, "CPU and GPU cloth differ by {worst} m");
 }
+
+/// `imprint check` prints the schedule (what each node does on the first frames) and warns
+/// about a writer that a switched-off node leaves without input; bad schedules are refused
+/// with the field named.
+#[test]
+fn check_prints_the_schedule_and_refuses_bad_ones() {
+    let nodes = r#"        "ball": Mesh(primitive: Sphere(radius: 0.3, segments: 16, rings: 8),
+                     motion: [Breathe(amplitude: 0.1, period: 1.0)]),
+        "vox": Voxelize(mesh: "ball", grid: Fit(resolution: 16)),
+        "field": DistanceField(boundary: "vox", measure: Never, every: 4, split: 2),
+        "off": DistanceField(boundary: "vox", measure: Never, enabled: false),
+        "w": WriteField(field: "field", npy: false, every: 2, offset: 1),
+        "w_off": WriteField(field: "off", npy: false),"#;
+    let c = case(nodes);
+    let text12 = std::fs::read_to_string(&c.file)
+        .unwrap()
+        .replace("frames: 2", "frames: 12");
+    std::fs::write(&c.file, text12).unwrap();
+    let out = run_ok(&["check", c.file.to_str().unwrap()], c.dir.path());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let row = |n: &str| {
+        text.lines()
+            .find(|l| l.starts_with(&format!("{n} ")))
+            .unwrap_or_else(|| panic!("no row {n} in {text}"))
+            .to_string()
+    };
+    assert!(row("field").contains(" #...12..12.. "), "{text}");
+    assert!(row("w").contains(" .w.w.w.w.w.w "), "{text}");
+    assert!(
+        text.contains("warning: writer 'w_off' loses its input 'off'"),
+        "{text}"
+    );
+    assert!(text.contains("disabled (enabled: false)"), "{text}");
+    expect_invalid(
+        &nodes.replace("every: 4, split: 2", "every: 2, split: 3"),
+        &[
+            "node 'field'",
+            "split must be between 1 and every (2), got 3",
+        ],
+    );
+    expect_invalid(
+        &nodes.replace("every: 2, offset: 1", "every: 2, offset: 2"),
+        &["node 'w'", "offset must be less than every (2), got 2"],
+    );
+}

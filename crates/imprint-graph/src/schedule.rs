@@ -195,8 +195,11 @@ impl Plan {
                 } else if matches!(node, NodeSpec::Mesh(_) | NodeSpec::Cloth(_)) {
                     ('#', true, true)
                 } else if sc.interpolate {
+                    // Frame 0 builds its segment's two keyframes whole; later ones in parts.
+                    let bootstrap = sc.key_at_or_before(0) + sc.every as i64;
                     let c = match sc.ahead_part_at(f) {
                         _ if first => '#',
+                        Some((k, _)) if k <= bootstrap => '.',
                         Some((_, p)) if sc.split > 1 => part_char(p),
                         Some(_) => '#',
                         None => '.',

@@ -207,6 +207,8 @@ fn an_interpolated_field_is_the_exact_blend_of_the_builds_around_each_frame() {
     // Builds: keyframes 0 and 4 whole on frame 0; keyframe 8's two parts on frames 4 and 5
     // (first needed on frame 5, which steps from 4 toward 8); 12's on 8 and 9; 16's on 12.
     assert_eq!(frames_run(&r, "field"), [0, 4, 5, 8, 9, 12]);
+    let table = p.schedule_table(13);
+    assert!(table.contains("field  #...12..12..1 "), "{table}");
 }
 
 /// The cloth's particles on every frame.
