@@ -48,7 +48,9 @@ fn main() {
     };
     let repeat: usize = arg("--repeat").map_or(15, |s| s.parse().expect("--repeat N"));
     let out = PathBuf::from(arg("--out").unwrap_or_else(|| "BENCHMARKS.md".into()));
-    let only: Vec<String> = arg("--only").map_or_else(
+    // `--assemble`: re-measure nothing, rebuild BENCHMARKS.md from the results and notes.
+    let assemble = args.iter().any(|a| a == "--assemble");
+    let only: Vec<String> = arg("--only").filter(|_| !assemble).map_or_else(
         || SECTIONS.iter().map(|s| s.0.to_string()).collect(),
         |s| s.split(',').map(str::to_string).collect(),
     );
@@ -64,7 +66,7 @@ fn main() {
 
     let mut totals = Vec::new();
     for (name, _) in SECTIONS {
-        if !only.iter().any(|o| o == name) {
+        if assemble || !only.iter().any(|o| o == name) {
             continue;
         }
         let machine = Machine::detect();

@@ -364,7 +364,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                     cache.dir.display()
                 ),
             );
-            let mut rec = Recorder::new(&ref_plan, &frames);
+            let mut rec = Recorder::new(&ref_plan);
             let report = run_observed(
                 &ref_plan,
                 &opts(cache.dir.join("run")),
@@ -389,7 +389,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     for (i, (overrides, plan)) in combos.iter().zip(&plans).enumerate() {
         let id = format!("{:0width$}", i + 1);
         let what = label(overrides, "");
-        let mut cmp = Comparer::new(&reference, &frames);
+        let mut cmp = Comparer::new(&reference);
         let run = run_observed(
             plan,
             &opts(args.out.join("runs").join(&id)),

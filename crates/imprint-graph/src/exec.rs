@@ -149,8 +149,14 @@ pub enum Observed<'a> {
 /// runs. Boundaries are not shown (they have no error metric of their own).
 pub trait Observer {
     /// Called after `node` ran (or reused its result) on `frame`, with the value its consumers
-    /// see on that frame.
+    /// see on that frame. The time it takes (and a field's read-back or blend for it) is left
+    /// out of the report's frame times.
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>);
+
+    /// Whether to show `node` at all (a field may need a read-back or a blend to be shown).
+    fn wants(&self, _node: &str) -> bool {
+        true
+    }
 }
 
 /// Runs `plan`; `progress(done, total)` is called after every frame.
@@ -216,6 +222,7 @@ pub fn run_observed(
     let total = frames.len() as u32;
     for (done, frame) in frames.clone().enumerate() {
         let frame_start = Instant::now();
+        let mut observed_ms = 0.0;
         let time = frame as f32 / plan.file.fps;
         let mut cpu_fields: BTreeMap<String, Arc<DistanceField>> = BTreeMap::new();
         for name in &plan.order {
@@ -523,7 +530,10 @@ pub fn run_observed(
                         .or_insert(1);
                 }
             }
-            if let Some(obs) = observer.as_deref_mut() {
+            if let Some(obs) = observer.as_deref_mut().filter(|o| o.wants(name)) {
+                // Not part of the frame's time: reading back or blending a field for the
+                // observer, and the observer itself.
+                let t = Instant::now();
                 match values.get(name.as_str()) {
                     Some(Value::Mesh(m)) => obs.observe(name, frame, Observed::Mesh(m)),
                     Some(Value::Heights(h)) => obs.observe(name, frame, Observed::Heights(h)),
@@ -533,6 +543,7 @@ pub fn run_observed(
                     }
                     Some(Value::Boundary(_)) | None => {}
                 }
+                observed_ms += t.elapsed().as_secs_f64() * 1e3;
             }
 
             // After the timed part: error measurement and writers.
@@ -797,7 +808,7 @@ pub fn run_observed(
         report.frames.push(frame);
         report
             .frame_ms
-            .push(frame_start.elapsed().as_secs_f64() * 1e3);
+            .push(frame_start.elapsed().as_secs_f64() * 1e3 - observed_ms);
         progress(done as u32 + 1, total);
     }
     // Whole-run writers: only now, after every frame succeeded.

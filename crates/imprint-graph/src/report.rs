@@ -46,7 +46,7 @@ pub struct Report {
     pub adapter: Option<String>,
     pub threads: usize,
     pub wall_ms: f64,
-    /// Wall time of each frame (all its nodes, writers included), ms.
+    /// Wall time of each frame (all its nodes, writers included; an observer's time not), ms.
     pub frame_ms: Vec<f64>,
     pub nodes: BTreeMap<String, NodeReport>,
     pub pruned: Vec<(String, String)>,

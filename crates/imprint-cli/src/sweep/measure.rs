@@ -25,7 +25,6 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::path::Path;
-use std::time::Instant;
 
 /// Probes kept per field or height field per frame.
 pub const MAX_PROBES: usize = 4096;
@@ -105,14 +104,10 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// `report`'s timing, with the time `spent` measuring on each frame taken off.
-    pub fn from_report(report: &Report, plan: &Plan, spent: &[f64]) -> Self {
-        let frame_ms = report
-            .frame_ms
-            .iter()
-            .enumerate()
-            .map(|(i, ms)| (ms - spent.get(i).copied().unwrap_or(0.0)).max(0.0))
-            .collect();
+    /// `report`'s timing (its frame times leave out what observers took, the measuring
+    /// here included).
+    pub fn from_report(report: &Report, plan: &Plan) -> Self {
+        let frame_ms = report.frame_ms.clone();
         let nodes = plan
             .order
             .iter()
@@ -277,23 +272,6 @@ impl Cache {
     }
 }
 
-/// Time the sweep spends measuring, per frame of the run (taken off the frame times).
-#[derive(Default)]
-struct Spent {
-    start: u32,
-    ms: Vec<f64>,
-}
-
-impl Spent {
-    fn add(&mut self, frame: u32, since: Instant) {
-        let i = frame.saturating_sub(self.start) as usize;
-        if self.ms.len() <= i {
-            self.ms.resize(i + 1, 0.0);
-        }
-        self.ms[i] += since.elapsed().as_secs_f64() * 1e3;
-    }
-}
-
 /// The track kind of what `node` produced, or `None` for a resource without a metric.
 fn kind_of(plan: &Plan, node: &str, value: &Observed<'_>) -> Option<TrackKind> {
     match value {
@@ -356,26 +334,21 @@ pub struct Recorder<'a> {
     plan: &'a Plan,
     tracks: Vec<Track>,
     data: Vec<f32>,
-    spent: Spent,
 }
 
 impl<'a> Recorder<'a> {
-    pub fn new(plan: &'a Plan, frames: &Range<u32>) -> Self {
+    pub fn new(plan: &'a Plan) -> Self {
         Recorder {
             plan,
             tracks: Vec::new(),
             data: Vec::new(),
-            spent: Spent {
-                start: frames.start,
-                ms: Vec::new(),
-            },
         }
     }
 
     /// The reference, with the run's timing (less the recording).
     pub fn finish(self, report: &Report) -> Reference {
         Reference {
-            timing: Timing::from_report(report, self.plan, &self.spent.ms),
+            timing: Timing::from_report(report, self.plan),
             tracks: self.tracks,
             data: self.data,
         }
@@ -384,7 +357,6 @@ impl<'a> Recorder<'a> {
 
 impl Observer for Recorder<'_> {
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>) {
-        let t0 = Instant::now();
         let Some(kind) = kind_of(self.plan, node, &value) else {
             return;
         };
@@ -411,7 +383,6 @@ impl Observer for Recorder<'_> {
             len: values.len(),
         });
         self.data.extend(values);
-        self.spent.add(frame, t0);
     }
 }
 
@@ -484,25 +455,20 @@ pub struct Comparer<'a> {
     pub errors: BTreeMap<String, Vec<FrameError>>,
     /// What could not be compared, for the row's status.
     pub notes: BTreeSet<String>,
-    spent: Spent,
 }
 
 impl<'a> Comparer<'a> {
-    pub fn new(reference: &'a Reference, frames: &Range<u32>) -> Self {
+    pub fn new(reference: &'a Reference) -> Self {
         Comparer {
             reference,
             errors: BTreeMap::new(),
             notes: BTreeSet::new(),
-            spent: Spent {
-                start: frames.start,
-                ms: Vec::new(),
-            },
         }
     }
 
-    /// The run's timing, less the comparing.
+    /// The run's timing (the comparing is not in it).
     pub fn timing(&self, report: &Report, plan: &Plan) -> Timing {
-        Timing::from_report(report, plan, &self.spent.ms)
+        Timing::from_report(report, plan)
     }
 }
 
@@ -551,11 +517,9 @@ impl Comparer<'_> {
 
 impl Observer for Comparer<'_> {
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>) {
-        let t0 = Instant::now();
         if let Some(err) = self.compare(node, frame, value) {
             self.errors.entry(node.to_string()).or_default().push(err);
         }
-        self.spent.add(frame, t0);
     }
 }
 
