@@ -63,7 +63,7 @@ pub struct Signed {
 /// Reads one sample as signed, given the particle's memory `side` (xyz the outward direction
 /// at its last sample, w = 1 when known) and how deep a crossing can reach (computed only
 /// when the vector has turned round: `reach()` is the rare path).
-#[inline]
+#[inline(always)]
 fn classify(d: f32, v: Vec3, side: Vec4, reach: impl Fn() -> f32) -> Option<(f32, Vec3)> {
     if !(d.is_finite() && v != Vec3::ZERO) {
         return None;
@@ -78,7 +78,7 @@ fn classify(d: f32, v: Vec3, side: Vec4, reach: impl Fn() -> f32) -> Option<(f32
 /// The body `c` at `x` (the particle's new position, `x_from` where it was), `s` of the way
 /// through the frame (the blend's weight is `c.span` mapped over the frame). None where the field knows no direction (far from the body, or exactly
 /// on its medial axis).
-#[inline]
+#[inline(always)]
 pub fn signed_sample(
     c: &Collider,
     x: Vec3,
@@ -150,7 +150,7 @@ pub struct Hit {
 
 /// Keeps `x` (the particle's new position; `x_from` where it was at the substep's start) at
 /// distance ε from a body read as `sample`, and updates the particle's memory `side`.
-#[inline]
+#[inline(always)]
 pub fn respond(
     x: &mut Vec3,
     x_from: Vec3,
@@ -176,7 +176,7 @@ pub fn respond(
 }
 
 /// Keeps `x` at height `ground + ε`, with the same friction.
-#[inline]
+#[inline(always)]
 pub fn ground(x: &mut Vec3, x_from: Vec3, h: f32, eps: f32, friction: f32) -> Option<Hit> {
     let target = h + eps;
     if x.y >= target {

@@ -103,7 +103,7 @@ fn cell_coords(spec: &imprint_core::GridSpec, p: Vec3) -> (IVec3, Vec3) {
     (b, (c - floor).into())
 }
 
-#[inline]
+#[inline(always)]
 fn finish(dist: f32, vec: Vec3, all_in: bool) -> FieldSample {
     if all_in {
         FieldSample {
