@@ -77,3 +77,86 @@ pub mod cloth {
         ClothSim::from_assets(params, &ClothAssets::default()).unwrap()
     }
 }
+
+/// Ground test pieces: fields, objects placed on them, and a sphere rolling across.
+pub mod ground {
+    use glam::{Mat4, Vec3};
+    use imprint_core::Mesh;
+    use imprint_core::mesh::primitives::{cuboid, uv_sphere};
+    use imprint_stages::ground::{GroundFrameMetrics, GroundParams, GroundSim, Initial, Material};
+    use std::time::Instant;
+
+    /// A flat field of `n × n` cells of `cell` m centred on the origin, `h0` m high.
+    pub fn params(n: u32, cell: f32, h0: f32, material: Material) -> GroundParams {
+        let mut p = GroundParams::new([n as f32 * cell; 2], [n, n], material);
+        p.initial = Initial::Flat(h0);
+        p
+    }
+
+    /// A simulator from in-memory params (no files).
+    pub fn sim(p: &GroundParams) -> GroundSim {
+        GroundSim::new(p, std::path::Path::new(".")).unwrap()
+    }
+
+    /// A fine sphere of radius `r` centred at `c`.
+    pub fn sphere(r: f32, c: Vec3) -> Mesh {
+        let mut m = uv_sphere(r, 128, 64);
+        m.transform(Mat4::from_translation(c));
+        m
+    }
+
+    /// An axis-aligned box with half-extents `half` centred at `c`.
+    pub fn cuboid_at(half: Vec3, c: Vec3) -> Mesh {
+        let mut m = cuboid(half, 1);
+        m.transform(Mat4::from_translation(c));
+        m
+    }
+
+    /// A sphere of radius `r` sunk `depth` into ground at `h0`, rolled along x from `x0` in
+    /// steps of `dx` for `frames` frames: the metrics of each frame.
+    pub fn roll(
+        g: &mut GroundSim,
+        r: f32,
+        depth: f32,
+        h0: f32,
+        x0: f32,
+        dx: f32,
+        frames: u32,
+    ) -> Vec<GroundFrameMetrics> {
+        (0..frames)
+            .map(|f| {
+                let c = Vec3::new(x0 + f as f32 * dx, h0 + r - depth, 0.0);
+                g.step(&[&sphere(r, c)]).unwrap()
+            })
+            .collect()
+    }
+
+    /// Milliseconds per contact frame (wall time of `step`) of a sphere, radius 1/10 of the
+    /// field's x size and sunk 1/40 of it, crossing the flat field `p` in `frames` frames.
+    /// The sphere's mesh is placed outside the timed region.
+    pub fn time_rolling_sphere(p: &GroundParams, frames: u32) -> f64 {
+        let mut g = sim(p);
+        let size = p.size[0];
+        let h0 = match p.initial {
+            Initial::Flat(h) => h,
+            Initial::Image { .. } => panic!("time_rolling_sphere wants a flat field"),
+        };
+        let (r, depth) = (0.1 * size, 0.025 * size);
+        let base = uv_sphere(r, 64, 32);
+        let mut total = 0.0;
+        let mut contact_frames = 0;
+        for f in 0..frames {
+            let x = -0.3 * size + 0.6 * size * f as f32 / frames as f32;
+            let mut m = base.clone();
+            m.transform(Mat4::from_translation(Vec3::new(x, h0 + r - depth, 0.0)));
+            let t = Instant::now();
+            let metrics = g.step(&[&m]).unwrap();
+            let dt = t.elapsed().as_secs_f64() * 1e3;
+            if metrics.contact_cells > 0 {
+                total += dt;
+                contact_frames += 1;
+            }
+        }
+        total / contact_frames.max(1) as f64
+    }
+}

@@ -748,3 +748,113 @@ fn check_prints_the_schedule_and_refuses_bad_ones() {
         &["node 'w'", "offset must be less than every (2), got 2"],
     );
 }
+
+/// A ball rolled over sand: the Ground node's height map comes out in every format, the
+/// print is as deep as the ball was pressed, and the sand's mass (α = 1) never changes.
+#[test]
+fn ground_node_keeps_its_prints_and_its_mass() {
+    let nodes = r#"        "ball": Mesh(primitive: Sphere(radius: 0.1, segments: 32, rings: 16),
+                     fit: (size: 0.2, center: (-0.2, 0.17, 0)),
+                     motion: [Rigid(keys: [(time: 0), (time: 1, translate: (0.4, 0, 0))])]),
+        "sand": Ground(objects: ["ball"],
+                       params: (size: (0.64, 0.32), resolution: (64, 32), initial: Flat(0.1))),
+        "h": WriteHeightmap(heights: "sand", formats: [Png16, Exr, Npy], every: 100),"#;
+    let c = case(nodes);
+    let text = std::fs::read_to_string(&c.file)
+        .unwrap()
+        .replace("frames: 2", "frames: 24, fps: 24");
+    std::fs::write(&c.file, text).unwrap();
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let d = c.dir.path().join("o");
+    assert!(d.join("h/sand_0000.exr").is_file() && d.join("h/sand_0000.npy").is_file());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let frames = report["nodes"]["sand"]["metrics"]["per_frame"]
+        .as_array()
+        .unwrap();
+    assert_eq!(frames.len(), 24);
+    let mass0 = frames[0]["mass_units"].as_i64().unwrap();
+    assert_eq!(mass0, 64 * 32 * 10_000, "0.1 m in 10 µm units per cell");
+    for f in frames {
+        assert_eq!(f["mass_units"].as_i64().unwrap(), mass0, "{f}");
+        assert!(f["contact_cells"].as_u64().unwrap() > 0, "{f}");
+        assert_eq!(f["removed_units"], f["displaced_units"], "{f}");
+    }
+}
+
+/// Snow falls on a box and a flat ground; a Ground node takes the ground's snow in
+/// (`accumulate`): its mass grows frame after frame with no object pressing, and a Snow node
+/// without a ground outputs the box with snow on its top.
+#[test]
+fn snow_piles_up_on_meshes_and_on_a_ground_that_takes_it_in() {
+    let nodes = r#"        "box": Mesh(primitive: Box(size: (0.2, 0.2, 0.2)), fit: (size: 0.2, center: (0, 0.2, 0))),
+        "snowy_box": Snow(meshes: ["box"], params: (directions: 4, resolution: 64, rate: 0.1)),
+        "fall": Snow(meshes: ["box"], ground: (size: (0.64, 0.64), resolution: (32, 32), height: 0.05),
+                     params: (directions: 4, resolution: 64, rate: 0.1)),
+        "ground": Ground(accumulate: "fall",
+                         params: (size: (0.64, 0.64), resolution: (32, 32), initial: Flat(0.05),
+                                  material: Preset(Snow))),
+        "m": WriteMesh(mesh: "snowy_box", every: 100),
+        "h": WriteHeightmap(heights: "ground", formats: [Npy], every: 100),"#;
+    let c = case(nodes);
+    let text = std::fs::read_to_string(&c.file)
+        .unwrap()
+        .replace("frames: 2", "frames: 6, fps: 10");
+    std::fs::write(&c.file, text).unwrap();
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let d = c.dir.path().join("o");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let mass: Vec<i64> = report["nodes"]["ground"]["metrics"]["per_frame"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["mass_units"].as_i64().unwrap())
+        .collect();
+    // 0.1 m/s at 10 fps: 1 cm per frame on open ground, taken in from the second frame on.
+    assert_eq!(mass[0], 32 * 32 * 5_000, "frame 0 takes nothing in");
+    for w in mass.windows(2) {
+        assert!(w[1] > w[0], "{mass:?}");
+    }
+    let open_cells = 32 * 32;
+    let per_frame = (mass[5] - mass[4]) as f64 / open_cells as f64 * 1e-5;
+    assert!(
+        per_frame > 0.005 && per_frame < 0.0105,
+        "{per_frame} m per frame"
+    );
+    let depth = report["nodes"]["snowy_box"]["metrics"]["per_frame"][5]["mesh_max_depth"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (depth - 0.06).abs() < 0.002,
+        "6 frames of 1 cm on the top: {depth}"
+    );
+}
+
+/// Ground and Snow parameters are checked before anything runs, errors naming the node.
+#[test]
+fn ground_and_snow_bad_parameters_are_named() {
+    expect_invalid(
+        r#"        "g": Ground(params: (size: (1.0, 1.0), resolution: (10, 20))),
+        "h": WriteHeightmap(heights: "g"),"#,
+        &["node 'g'"],
+    );
+    expect_invalid(
+        r#"        "box": Mesh(primitive: Box(size: (0.2, 0.2, 0.2))),
+        "s": Snow(meshes: ["box"], params: (directions: 0)),
+        "m": WriteMesh(mesh: "s"),"#,
+        &["node 's'", "directions"],
+    );
+    expect_invalid(
+        r#"        "box": Mesh(primitive: Box(size: (0.2, 0.2, 0.2))),
+        "s": Snow(meshes: ["box"], ground: (size: (1.0, 2.0), resolution: (10, 10))),
+        "h": WriteHeightmap(heights: "s"),"#,
+        &["node 's'", "square"],
+    );
+}

@@ -113,6 +113,20 @@ enum Stage {
         gpu: Option<Box<GpuCloth>>,
         gpu_previous: Vec<(Arc<DistanceField>, Arc<GpuCollider>)>,
     },
+    /// A ground that keeps its prints from frame to frame.
+    Ground {
+        objects: Vec<String>,
+        sim: Box<imprint_stages::ground::GroundSim>,
+        /// The `accumulate` input and its heights last frame (their rise is added).
+        accumulate: Option<String>,
+        last: Option<Arc<HeightField>>,
+    },
+    /// Snow building up on meshes (and a flat ground) over the run.
+    Snow {
+        meshes: Vec<String>,
+        sim: Box<imprint_stages::snow::SnowSim>,
+        ground: Option<HeightField>,
+    },
     Heightmap {
         input: String,
         region: HeightRegion,
@@ -324,10 +338,7 @@ pub fn run_observed(
                                 imprint_stages::sdf::gpu::build_field_gpu(ctx, &gb, sched.band)?;
                             ctx.wait()?;
                             values.insert(name.clone(), Value::Field(FieldValue::Gpu(Arc::new(f))));
-                            versions
-                                .entry(name.clone())
-                                .and_modify(|v| *v += 1)
-                                .or_insert(1);
+                            bump(&mut versions, name);
                             began = true;
                             new_build = true;
                         }
@@ -372,10 +383,7 @@ pub fn run_observed(
                         );
                         values.insert(name.clone(), Value::Field(v));
                         if !same {
-                            versions
-                                .entry(name.clone())
-                                .and_modify(|v| *v += 1)
-                                .or_insert(1);
+                            bump(&mut versions, name);
                         }
                     }
                     step.worked
@@ -460,19 +468,10 @@ pub fn run_observed(
                         *previous = ends.into_iter().map(|(_, e, _)| e).collect();
                         (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
                     };
-                    let per_frame = nr
-                        .metrics
-                        .entry("per_frame".into())
-                        .or_insert_with(|| serde_json::Value::Array(Vec::new()));
-                    if let serde_json::Value::Array(a) = per_frame {
-                        a.push(m);
-                    }
+                    push_per_frame(nr, m);
                     nr.metrics.insert("particles".into(), sim.len().into());
                     values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
-                    versions
-                        .entry(name.clone())
-                        .and_modify(|v| *v += 1)
-                        .or_insert(1);
+                    bump(&mut versions, name);
                     began = true;
                     true
                 }
@@ -507,6 +506,103 @@ pub fn run_observed(
                         false
                     }
                 }
+                Stage::Ground {
+                    objects,
+                    sim,
+                    accumulate,
+                    last,
+                } => {
+                    // Fresh snow (or anything piling up) first: the rise since last frame.
+                    if let Some(a) = accumulate {
+                        let Some(Value::Heights(now)) = values.get(a.as_str()) else {
+                            unreachable!("edges are typed")
+                        };
+                        if let Some(before) = last.as_ref() {
+                            let rise: Vec<f32> = now
+                                .heights
+                                .iter()
+                                .zip(&before.heights)
+                                .map(|(n, b)| n - b)
+                                .collect();
+                            sim.add_heights(&rise).map_err(|e| {
+                                Error::Invalid(format!("node '{name}', accumulate '{a}': {e}"))
+                            })?;
+                        }
+                        *last = Some(now.clone());
+                    }
+                    let meshes: Vec<Arc<Mesh>> = objects
+                        .iter()
+                        .map(|o| match values.get(o.as_str()) {
+                            Some(Value::Mesh(m)) => m.clone(),
+                            _ => unreachable!("edges are typed"),
+                        })
+                        .collect();
+                    let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
+                    let m = sim.step(&refs).map_err(|e| match e {
+                        Error::Numerical { message, hint, .. } => Error::Numerical {
+                            node: name.clone(),
+                            frame,
+                            message,
+                            hint,
+                        },
+                        Error::Invalid(m) => {
+                            Error::Invalid(format!("node '{name}', frame {frame}: {m}"))
+                        }
+                        other => other,
+                    })?;
+                    push_per_frame(nr, serde_json::to_value(m).expect("plain data"));
+                    values.insert(
+                        name.clone(),
+                        Value::Heights(Arc::new(sim.to_height_field())),
+                    );
+                    bump(&mut versions, name);
+                    began = true;
+                    true
+                }
+                Stage::Snow {
+                    meshes,
+                    sim,
+                    ground,
+                } => {
+                    let ms: Vec<Arc<Mesh>> = meshes
+                        .iter()
+                        .map(|m| match values.get(m.as_str()) {
+                            Some(Value::Mesh(m)) => m.clone(),
+                            _ => unreachable!("edges are typed"),
+                        })
+                        .collect();
+                    let refs: Vec<&Mesh> = ms.iter().map(|m| &**m).collect();
+                    let step = sim
+                        .step(&refs, ground.as_ref(), 1.0 / plan.file.fps)
+                        .map_err(|e| {
+                            Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
+                        })?;
+                    let cover = sim.cover(&refs)?;
+                    let mut m = serde_json::Map::new();
+                    m.insert("frame".into(), frame.into());
+                    m.insert("reached".into(), step.reached.into());
+                    if let Some(g) = sim.ground() {
+                        m.insert("ground_snow_volume".into(), g.volume().into());
+                    }
+                    let deepest = cover.meshes[0].depth.iter().copied().fold(0.0f32, f32::max);
+                    m.insert("mesh_max_depth".into(), deepest.into());
+                    push_per_frame(nr, serde_json::Value::Object(m));
+                    let v = match cover.ground {
+                        Some(g) => Value::Heights(Arc::new(g.surface)),
+                        None => Value::Mesh(Arc::new(
+                            cover
+                                .meshes
+                                .into_iter()
+                                .next()
+                                .expect("one mesh at least")
+                                .mesh,
+                        )),
+                    };
+                    values.insert(name.clone(), v);
+                    bump(&mut versions, name);
+                    began = true;
+                    true
+                }
                 Stage::WriteField { .. }
                 | Stage::WriteMesh { .. }
                 | Stage::WriteHeightmap { .. }
@@ -524,10 +620,7 @@ pub fn run_observed(
                     spec,
                     NodeSpec::Mesh(_) | NodeSpec::Voxelize(_) | NodeSpec::Heightmap(_)
                 ) {
-                    versions
-                        .entry(name.clone())
-                        .and_modify(|v| *v += 1)
-                        .or_insert(1);
+                    bump(&mut versions, name);
                 }
             }
             if let Some(obs) = observer.as_deref_mut().filter(|o| o.wants(name)) {
@@ -923,6 +1016,54 @@ fn cpu_field(
     Ok(f)
 }
 
+/// A node published a new value: its consumers see its version move.
+fn bump(versions: &mut BTreeMap<String, u64>, name: &str) {
+    *versions.entry(name.to_string()).or_default() += 1;
+}
+
+/// Appends one frame's metrics to the node's `per_frame` list in `report.json`.
+fn push_per_frame(nr: &mut NodeReport, frame_metrics: serde_json::Value) {
+    let per_frame = nr
+        .metrics
+        .entry("per_frame".into())
+        .or_insert_with(|| serde_json::Value::Array(Vec::new()));
+    if let serde_json::Value::Array(a) = per_frame {
+        a.push(frame_metrics);
+    }
+}
+
+/// The flat ground of a `Snow` node as a height field (square cells, centred on the origin
+/// unless an origin is given).
+pub fn snow_ground(g: &crate::schema::SnowGround) -> imprint_core::Result<HeightField> {
+    let (nx, nz) = g.resolution;
+    if nx == 0 || nz == 0 {
+        return Err(Error::Invalid(format!(
+            "ground resolution must be at least 1 x 1, got {nx} x {nz}"
+        )));
+    }
+    let cell = g.size.0 / nx as f32;
+    if !(cell.is_finite() && cell > 0.0) || (g.size.1 / nz as f32 - cell).abs() > 1e-6 * cell {
+        return Err(Error::Invalid(format!(
+            "ground cells must be square: size ({}, {}) over resolution ({nx}, {nz}) gives \
+             {} x {}",
+            g.size.0,
+            g.size.1,
+            cell,
+            g.size.1 / nz as f32
+        )));
+    }
+    let origin = match g.origin {
+        Some((x, z)) => glam::Vec2::new(x, z),
+        None => glam::Vec2::new(-g.size.0, -g.size.1) * 0.5 + glam::Vec2::splat(cell * 0.5),
+    };
+    HeightField::new(
+        origin,
+        cell,
+        glam::UVec2::new(nx, nz),
+        vec![g.height; nx as usize * nz as usize],
+    )
+}
+
 /// Which backend a node with two paths runs on.
 fn choose_gpu(
     want: Backend,
@@ -1157,6 +1298,23 @@ fn build_stages(
                     every: w.every,
                 }
             }
+            NodeSpec::Snow(n) => Stage::Snow {
+                meshes: n.meshes.clone(),
+                sim: Box::new(
+                    imprint_stages::snow::SnowSim::new(&n.params)
+                        .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?,
+                ),
+                ground: n.ground.as_ref().map(snow_ground).transpose()?,
+            },
+            NodeSpec::Ground(g) => Stage::Ground {
+                accumulate: g.accumulate.clone(),
+                last: None,
+                objects: g.objects.clone(),
+                sim: Box::new(
+                    imprint_stages::ground::GroundSim::new(&g.params, &plan.base_dir)
+                        .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?,
+                ),
+            },
             NodeSpec::WriteMesh(w) => Stage::WriteMesh {
                 input: w.mesh.clone(),
                 dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),

@@ -398,6 +398,31 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             }
         }
         NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => {}
+        NodeSpec::Snow(n) => {
+            n.params
+                .validate()
+                .map_err(|e| fail("params", e.to_string()))?;
+            if n.meshes.is_empty() {
+                return Err(fail("meshes", "a Snow node needs at least one mesh".into()));
+            }
+            if let Some(g) = &n.ground {
+                crate::exec::snow_ground(g).map_err(|e| fail("ground", e.to_string()))?;
+            }
+        }
+        NodeSpec::Ground(g) => {
+            g.params
+                .validate()
+                .map_err(|e| fail("params", e.to_string()))?;
+            if let imprint_stages::ground::Initial::Image { path, .. } = &g.params.initial {
+                let full = base_dir.join(path);
+                if !full.is_file() {
+                    return Err(fail(
+                        "params",
+                        format!("initial height image not found: {}", full.display()),
+                    ));
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -93,7 +93,9 @@ impl NodeSpec {
             NodeSpec::WriteMesh(w) => (w.every, w.offset),
             NodeSpec::WriteHeightmap(w) => (w.every, w.offset),
             NodeSpec::Render(r) => (r.every, r.offset),
-            NodeSpec::Mesh(_) | NodeSpec::Cloth(_) => (1, 0),
+            NodeSpec::Mesh(_) | NodeSpec::Cloth(_) | NodeSpec::Ground(_) | NodeSpec::Snow(_) => {
+                (1, 0)
+            }
         };
         let (split, interpolate) = match self {
             NodeSpec::DistanceField(f) => (f.split, f.interpolate),
@@ -119,6 +121,8 @@ impl NodeSpec {
             NodeSpec::WriteMesh(w) => w.enabled,
             NodeSpec::WriteHeightmap(w) => w.enabled,
             NodeSpec::Render(r) => r.enabled,
+            NodeSpec::Ground(g) => g.enabled,
+            NodeSpec::Snow(n) => n.enabled,
         }
     }
 }
@@ -140,7 +144,7 @@ impl Plan {
             let node = &nodes[name];
             let is_static = match node {
                 NodeSpec::Mesh(m) => m.motion.iter().all(|mo| mo.is_time_invariant()),
-                NodeSpec::Cloth(_) => false,
+                NodeSpec::Cloth(_) | NodeSpec::Ground(_) | NodeSpec::Snow(_) => false,
                 NodeSpec::DistanceField(f) if f.interpolate => {
                     let NodeSpec::Voxelize(v) = &nodes[&f.boundary] else {
                         unreachable!("edges are typed")
@@ -192,7 +196,13 @@ impl Plan {
                     } else {
                         ('.', false, false)
                     }
-                } else if matches!(node, NodeSpec::Mesh(_) | NodeSpec::Cloth(_)) {
+                } else if matches!(
+                    node,
+                    NodeSpec::Mesh(_)
+                        | NodeSpec::Cloth(_)
+                        | NodeSpec::Ground(_)
+                        | NodeSpec::Snow(_)
+                ) {
                     ('#', true, true)
                 } else if sc.interpolate {
                     // Frame 0 builds its segment's two keyframes whole; later ones in parts.

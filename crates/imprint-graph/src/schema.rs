@@ -5,7 +5,9 @@ use imprint_core::BoundaryVariant;
 use imprint_render::slice::SliceOptions;
 use imprint_stages::cloth::ClothParams;
 use imprint_stages::depth::HeightView;
+use imprint_stages::ground::GroundParams;
 use imprint_stages::mesh::MeshParams;
+use imprint_stages::snow::SnowParams;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -64,6 +66,68 @@ pub enum NodeSpec {
     /// Renders meshes, height fields and field slices to a PNG per frame, with an optional
     /// contact sheet and GIF of the run (inputs: Mesh, HeightField, DistanceField; a writer).
     Render(RenderNode),
+    /// A deformable ground (Onoue & Nishita): objects pressed into it leave prints that last
+    /// (inputs: Mesh objects; output: HeightField).
+    Ground(GroundNode),
+    /// Snow falling on meshes and, optionally, a flat ground (Tokoi): arrival by depth maps
+    /// from jittered directions, accumulation, slides steeper than the repose angle (inputs:
+    /// Mesh; output: with `ground`, the ground's surface with its snow as a HeightField;
+    /// without, the first mesh with its snow as a Mesh).
+    Snow(SnowNode),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SnowNode {
+    /// Mesh nodes the snow falls on; each also shades the others (and the ground).
+    pub meshes: Vec<String>,
+    /// A flat ground under the meshes that collects snow too; the node then outputs the
+    /// ground's snow surface instead of the first mesh.
+    #[serde(default)]
+    pub ground: Option<SnowGround>,
+    /// Direction, jitter, rate, repose angle, …: `imprint_stages::snow::SnowParams`.
+    #[serde(default)]
+    pub params: SnowParams,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+}
+
+/// The flat ground a `Snow` node collects snow on (cells as a `Ground` node's, so a Ground
+/// with the same grid can take the snow in with `accumulate`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SnowGround {
+    /// Extent along x and z, m.
+    pub size: (f32, f32),
+    /// Cells along x and z (square cells).
+    pub resolution: (u32, u32),
+    /// World (x, z) of the centre of cell (0, 0); default: centred on the origin.
+    #[serde(default)]
+    pub origin: Option<(f32, f32)>,
+    /// Height of the bare ground, m.
+    #[serde(default)]
+    pub height: f32,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroundNode {
+    /// Mesh nodes pressed into the ground every frame (seen from below; the ground does not
+    /// push back).
+    #[serde(default)]
+    pub objects: Vec<String>,
+    /// Grid, initial height, material (`Preset(Sand | Snow)` or custom), relaxation:
+    /// `imprint_stages::ground::GroundParams`.
+    pub params: GroundParams,
+    /// A HeightField node (a `Snow` node's ground, on the same cells) whose rise from one
+    /// frame to the next is added to this ground before the objects press into it: fresh
+    /// snow that then takes prints.
+    #[serde(default)]
+    pub accumulate: Option<String>,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -520,6 +584,8 @@ impl NodeSpec {
             NodeSpec::Heightmap(_) => "Heightmap",
             NodeSpec::WriteHeightmap(_) => "WriteHeightmap",
             NodeSpec::Render(_) => "Render",
+            NodeSpec::Ground(_) => "Ground",
+            NodeSpec::Snow(_) => "Snow",
         }
     }
 
@@ -537,6 +603,21 @@ impl NodeSpec {
                 .map(|f| ("colliders", f.as_str(), PortType::DistanceField))
                 .collect(),
             NodeSpec::Heightmap(h) => vec![("mesh", &h.mesh, PortType::Mesh)],
+            NodeSpec::Ground(g) => g
+                .objects
+                .iter()
+                .map(|o| ("objects", o.as_str(), PortType::Mesh))
+                .chain(
+                    g.accumulate
+                        .iter()
+                        .map(|a| ("accumulate", a.as_str(), PortType::HeightField)),
+                )
+                .collect(),
+            NodeSpec::Snow(n) => n
+                .meshes
+                .iter()
+                .map(|m| ("meshes", m.as_str(), PortType::Mesh))
+                .collect(),
             NodeSpec::WriteHeightmap(w) => vec![("heights", &w.heights, PortType::HeightField)],
             NodeSpec::Render(r) => r
                 .objects
@@ -561,7 +642,9 @@ impl NodeSpec {
             NodeSpec::Voxelize(_) => Some(PortType::Boundary),
             NodeSpec::DistanceField(_) => Some(PortType::DistanceField),
             NodeSpec::Cloth(_) => Some(PortType::Mesh),
-            NodeSpec::Heightmap(_) => Some(PortType::HeightField),
+            NodeSpec::Heightmap(_) | NodeSpec::Ground(_) => Some(PortType::HeightField),
+            NodeSpec::Snow(n) if n.ground.is_some() => Some(PortType::HeightField),
+            NodeSpec::Snow(_) => Some(PortType::Mesh),
             NodeSpec::WriteField(_)
             | NodeSpec::WriteMesh(_)
             | NodeSpec::WriteHeightmap(_)

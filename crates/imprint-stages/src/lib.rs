@@ -5,7 +5,9 @@
 mod bare_option;
 pub mod cloth;
 pub mod depth;
+pub mod ground;
 pub mod mesh;
 pub mod metrics;
 pub mod sdf;
+pub mod snow;
 pub mod voxel;
