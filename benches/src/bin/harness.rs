@@ -23,7 +23,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 6] = [
+const SECTIONS: [(&str, &str); 7] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -36,6 +36,7 @@ const SECTIONS: [(&str, &str); 6] = [
     ("render", "frames and depth maps, CPU and GPU"),
     ("cloth", "the cloth against Taichi, and H's bunny scene"),
     ("schedule", "schedules: H Table 1 columns (c) and (d)"),
+    ("ground", "the ground and snow stages"),
 ];
 
 fn main() {
@@ -85,6 +86,7 @@ fn main() {
             "render" => imprint_benches::render::section(&root, repeat),
             "cloth" => imprint_benches::cloth::section(&root, repeat),
             "schedule" => imprint_benches::schedule::section(&root, repeat),
+            "ground" => imprint_benches::ground_snow::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(

@@ -120,12 +120,16 @@ enum Stage {
         /// The `accumulate` input and its heights last frame (their rise is added).
         accumulate: Option<String>,
         last: Option<Arc<HeightField>>,
+        /// The GPU rasteriser for the contact view, when the node runs on the GPU.
+        gpu: Option<Box<GpuRasterizer>>,
     },
     /// Snow building up on meshes (and a flat ground) over the run.
     Snow {
         meshes: Vec<String>,
         sim: Box<imprint_stages::snow::SnowSim>,
         ground: Option<HeightField>,
+        /// The GPU rasteriser for the depth maps, when the node runs on the GPU.
+        gpu: Option<Box<GpuRasterizer>>,
     },
     Heightmap {
         input: String,
@@ -211,7 +215,9 @@ pub fn run_observed(
         let node = &plan.file.nodes[name];
         let on_gpu = match &stages[name] {
             Stage::Voxelize { gpu, .. } | Stage::Field { gpu, .. } => *gpu,
-            Stage::Heightmap { gpu, .. } => gpu.is_some(),
+            Stage::Heightmap { gpu, .. } | Stage::Ground { gpu, .. } | Stage::Snow { gpu, .. } => {
+                gpu.is_some()
+            }
             Stage::Render { gpu, .. } => gpu.is_some(),
             Stage::Cloth { gpu, .. } => gpu.is_some(),
             _ => false,
@@ -511,6 +517,7 @@ pub fn run_observed(
                     sim,
                     accumulate,
                     last,
+                    gpu: raster,
                 } => {
                     // Fresh snow (or anything piling up) first: the rise since last frame.
                     if let Some(a) = accumulate {
@@ -538,7 +545,13 @@ pub fn run_observed(
                         })
                         .collect();
                     let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
-                    let m = sim.step(&refs).map_err(|e| match e {
+                    let stepped = match raster {
+                        Some(r) => sim.step_with(&refs, |m, cam, w, h, o| {
+                            r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
+                        }),
+                        None => sim.step(&refs),
+                    };
+                    let m = stepped.map_err(|e| match e {
                         Error::Numerical { message, hint, .. } => Error::Numerical {
                             node: name.clone(),
                             frame,
@@ -563,6 +576,7 @@ pub fn run_observed(
                     meshes,
                     sim,
                     ground,
+                    gpu: raster,
                 } => {
                     let ms: Vec<Arc<Mesh>> = meshes
                         .iter()
@@ -572,11 +586,14 @@ pub fn run_observed(
                         })
                         .collect();
                     let refs: Vec<&Mesh> = ms.iter().map(|m| &**m).collect();
-                    let step = sim
-                        .step(&refs, ground.as_ref(), 1.0 / plan.file.fps)
-                        .map_err(|e| {
-                            Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
-                        })?;
+                    let dt = 1.0 / plan.file.fps;
+                    let step = match raster {
+                        Some(r) => sim.step_with(&refs, ground.as_ref(), dt, |m, cam, w, h, o| {
+                            r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
+                        }),
+                        None => sim.step(&refs, ground.as_ref(), dt),
+                    }
+                    .map_err(|e| Error::Invalid(format!("node '{name}', frame {frame}: {e}")))?;
                     let cover = sim.cover(&refs)?;
                     let mut m = serde_json::Map::new();
                     m.insert("frame".into(), frame.into());
@@ -1064,6 +1081,19 @@ pub fn snow_ground(g: &crate::schema::SnowGround) -> imprint_core::Result<Height
     )
 }
 
+/// A depth rasteriser on the GPU for a node whose depth maps run there.
+fn gpu_rasterizer(
+    want: Backend,
+    node: &str,
+    gpu: &mut Option<&'static GpuContext>,
+) -> crate::Result<Option<Box<GpuRasterizer>>> {
+    Ok(if choose_gpu(want, node, gpu)? {
+        Some(Box::new(GpuRasterizer::new(gpu.expect("chosen"))?))
+    } else {
+        None
+    })
+}
+
 /// Which backend a node with two paths runs on.
 fn choose_gpu(
     want: Backend,
@@ -1280,11 +1310,7 @@ fn build_stages(
                     input: h.mesh.clone(),
                     region,
                     view: h.view,
-                    gpu: if choose_gpu(want, name, gpu)? {
-                        Some(Box::new(GpuRasterizer::new(gpu.expect("chosen"))?))
-                    } else {
-                        None
-                    },
+                    gpu: gpu_rasterizer(want, name, gpu)?,
                 }
             }
             NodeSpec::WriteHeightmap(w) => {
@@ -1305,10 +1331,12 @@ fn build_stages(
                         .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?,
                 ),
                 ground: n.ground.as_ref().map(snow_ground).transpose()?,
+                gpu: gpu_rasterizer(want, name, gpu)?,
             },
             NodeSpec::Ground(g) => Stage::Ground {
                 accumulate: g.accumulate.clone(),
                 last: None,
+                gpu: gpu_rasterizer(want, name, gpu)?,
                 objects: g.objects.clone(),
                 sim: Box::new(
                     imprint_stages::ground::GroundSim::new(&g.params, &plan.base_dir)

@@ -88,6 +88,9 @@ pub struct SnowNode {
     /// Direction, jitter, rate, repose angle, …: `imprint_stages::snow::SnowParams`.
     #[serde(default)]
     pub params: SnowParams,
+    /// Where the K depth maps are rendered; deposit and slides run on the CPU.
+    #[serde(default)]
+    pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
     #[serde(default = "yes")]
     pub enabled: bool,
@@ -125,6 +128,10 @@ pub struct GroundNode {
     /// snow that then takes prints.
     #[serde(default)]
     pub accumulate: Option<String>,
+    /// Where the contact view (the depth map from below) is rendered; the passes run on the
+    /// CPU.
+    #[serde(default)]
+    pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
     #[serde(default = "yes")]
     pub enabled: bool,
@@ -665,6 +672,8 @@ impl NodeSpec {
                 | NodeSpec::Heightmap(_)
                 | NodeSpec::Render(_)
                 | NodeSpec::Cloth(_)
+                | NodeSpec::Ground(_)
+                | NodeSpec::Snow(_)
         )
     }
 
@@ -676,6 +685,8 @@ impl NodeSpec {
             NodeSpec::Heightmap(h) => h.backend,
             NodeSpec::Render(r) => r.backend,
             NodeSpec::Cloth(c) => c.backend,
+            NodeSpec::Ground(g) => g.backend,
+            NodeSpec::Snow(n) => n.backend,
             _ => None,
         }
     }

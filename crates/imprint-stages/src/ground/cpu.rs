@@ -127,13 +127,31 @@ impl GroundSim {
     /// On an error (`Full` relaxation not at rest within `max_relax_iterations`) the ground
     /// is left as it was at the frame's start.
     pub fn step(&mut self, objects: &[&Mesh]) -> Result<GroundFrameMetrics> {
+        self.step_with(objects, imprint_core::raster::rasterize_depth_with)
+    }
+
+    /// [`GroundSim::step`] with the contact view from any rasteriser with the signature of
+    /// `imprint_core::raster::rasterize_depth_with` (the GPU one is a closure over its context).
+    pub fn step_with(
+        &mut self,
+        objects: &[&Mesh],
+        rasterize: impl FnMut(
+            &Mesh,
+            &imprint_core::camera::Camera,
+            u32,
+            u32,
+            &imprint_core::raster::RasterOptions,
+        ) -> Result<imprint_core::raster::DepthMap>,
+    ) -> Result<GroundFrameMetrics> {
         let mut m = GroundFrameMetrics {
             frame: self.frame,
             ..Default::default()
         };
         self.maps = None;
         let start = (self.relaxation == Relaxation::Full).then(|| self.heights.clone());
-        if let Some(b) = contact::object_bottoms(objects, &self.grid, &self.heights)? {
+        if let Some(b) =
+            contact::object_bottoms_with(objects, &self.grid, &self.heights, rasterize)?
+        {
             self.press(&b, &mut m);
         }
         if self.relaxation == Relaxation::Full

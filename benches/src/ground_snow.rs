@@ -1,0 +1,96 @@
+//! Section 8 of BENCHMARKS.md: the ground (O) and snow (T) stages on the CPU.
+//!
+//! - Ground: a sphere (radius 1/10 of the field, sunk 1/40 of it) crossing a flat field of
+//!   256² and 1024² cells, Sand (labelled slump, En 5), Snow (no slump) and Sand with full
+//!   relaxation; ms per frame with contact (`imprint_tests::ground::time_rolling_sphere`, the
+//!   same function the ignored test runs). O: 70 ms for 256² on a 2002 PC; goal ≤ 2 ms here.
+//! - Snow: one step (16 jittered depth maps at 512² + deposit + stabilisation) over a sphere
+//!   of 40,000 triangles on a 72² ground (49,762 triangles in all); goal ≤ 150 ms here.
+
+use glam::{Mat4, UVec2, Vec2, Vec3};
+use imprint_core::HeightField;
+use imprint_core::mesh::primitives::uv_sphere;
+use imprint_stages::ground::{GroundParams, Material, Preset, Relaxation};
+use imprint_stages::snow::{SnowParams, SnowSim};
+use std::fmt::Write;
+use std::path::Path;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+pub fn section(_root: &Path, repeat: usize) -> String {
+    let mut s = String::from("## 8. Ground and snow (CPU)\n\n");
+    let runs = repeat.clamp(1, 5);
+    let _ = writeln!(
+        s,
+        "**Ground.** A sphere (radius 1/10 of the field's side, sunk 1/40 of it) crosses a flat \
+         field 2.56 m wide in 48 frames; ms per frame with contact (wall time of `GroundSim::step`: \
+         contact by the depth rasteriser, contour maps, displacement, slump), median of {runs} runs. \
+         O reports 70 ms for 256² on a Pentium III with a GeForce2 MX; goal (issue) ≤ 2 ms for 256².\n"
+    );
+    let _ = writeln!(s, "| cells | material | ms per contact frame |");
+    let _ = writeln!(s, "|---:|---|---:|");
+    for n in [256u32, 1024] {
+        for (label, material, relaxation) in [
+            (
+                "Sand (θ 30°, En 5, α 1), labelled",
+                Material::Preset(Preset::Sand),
+                Relaxation::Labelled,
+            ),
+            (
+                "Snow (θ 90°, En 0, α 0)",
+                Material::Preset(Preset::Snow),
+                Relaxation::Labelled,
+            ),
+            (
+                "Sand, full relaxation",
+                Material::Preset(Preset::Sand),
+                Relaxation::Full,
+            ),
+        ] {
+            if n == 1024 && relaxation == Relaxation::Full {
+                continue;
+            }
+            let mut p = GroundParams::new([2.56, 2.56], [n, n], material);
+            p.relaxation = relaxation;
+            let ms = median(
+                (0..runs)
+                    .map(|_| imprint_tests::ground::time_rolling_sphere(&p, 48))
+                    .collect(),
+            );
+            eprintln!("ground: {n}², {label}: {ms:.2} ms");
+            let _ = writeln!(s, "| {n}² | {label} | {ms:.2} |");
+        }
+    }
+    let mut ball = uv_sphere(0.5, 160, 125);
+    ball.transform(Mat4::from_translation(Vec3::new(0.0, 0.6, 0.0)));
+    let ground = HeightField::constant(Vec2::splat(-1.5), 3.0 / 71.0, UVec2::splat(72), 0.0)
+        .expect("ground");
+    let p = SnowParams::default();
+    let mut sim = SnowSim::new(&p).expect("snow");
+    let mut times = Vec::new();
+    for _ in 0..runs.max(3) {
+        let t = Instant::now();
+        sim.step(&[&ball], Some(&ground), 1.0 / 60.0)
+            .expect("snow step");
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let ms = median(times);
+    eprintln!("snow: {ms:.1} ms per step");
+    let _ = writeln!(
+        s,
+        "\n**Snow.** One `SnowSim::step` (16 jittered directions, 512² depth maps, deposit on the \
+         {} mesh vertices and 72² ground cells, stabilisation) over a {}-triangle sphere on a 72² \
+         ground ({} triangles in all): **{ms:.1} ms** per step, median of {} steps; goal (issue) \
+         ≤ 150 ms. The depth maps are nearly all of it; a 512² ground (562k triangles) takes ~0.6 s \
+         a step, because every cell becomes two triangles in every map.\n",
+        ball.positions.len(),
+        ball.triangles.len(),
+        ball.triangles.len() + 2 * 71 * 71,
+        runs.max(3)
+    );
+    s
+}
