@@ -122,6 +122,8 @@ enum Stage {
         last: Option<Arc<HeightField>>,
         /// The GPU rasteriser for the contact view, when the node runs on the GPU.
         gpu: Option<Box<GpuRasterizer>>,
+        /// The ground's passes on the GPU too (heights kept there), when they can be.
+        gpu_ground: Option<Box<imprint_stages::ground::gpu::GpuGround>>,
     },
     /// Snow building up on meshes (and a flat ground) over the run.
     Snow {
@@ -518,6 +520,7 @@ pub fn run_observed(
                     accumulate,
                     last,
                     gpu: raster,
+                    gpu_ground,
                 } => {
                     // Fresh snow (or anything piling up) first: the rise since last frame.
                     if let Some(a) = accumulate {
@@ -545,11 +548,17 @@ pub fn run_observed(
                         })
                         .collect();
                     let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
-                    let stepped = match raster {
-                        Some(r) => sim.step_with(&refs, |m, cam, w, h, o| {
+                    let stepped = match (raster, gpu_ground.as_mut()) {
+                        (Some(r), Some(g)) => {
+                            let ctx = gpu.expect("GPU chosen at build");
+                            g.step_with(ctx, &refs, |m, cam, w, h, o| {
+                                r.depth_map(ctx, m, cam, w, h, o)
+                            })
+                        }
+                        (Some(r), None) => sim.step_with(&refs, |m, cam, w, h, o| {
                             r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
                         }),
-                        None => sim.step(&refs),
+                        (None, _) => sim.step(&refs),
                     };
                     let m = stepped.map_err(|e| match e {
                         Error::Numerical { message, hint, .. } => Error::Numerical {
@@ -564,10 +573,11 @@ pub fn run_observed(
                         other => other,
                     })?;
                     push_per_frame(nr, serde_json::to_value(m).expect("plain data"));
-                    values.insert(
-                        name.clone(),
-                        Value::Heights(Arc::new(sim.to_height_field())),
-                    );
+                    let heights = match gpu_ground {
+                        Some(g) => g.to_height_field(),
+                        None => sim.to_height_field(),
+                    };
+                    values.insert(name.clone(), Value::Heights(Arc::new(heights)));
                     bump(&mut versions, name);
                     began = true;
                     true
@@ -1333,16 +1343,41 @@ fn build_stages(
                 ground: n.ground.as_ref().map(snow_ground).transpose()?,
                 gpu: gpu_rasterizer(want, name, gpu)?,
             },
-            NodeSpec::Ground(g) => Stage::Ground {
-                accumulate: g.accumulate.clone(),
-                last: None,
-                gpu: gpu_rasterizer(want, name, gpu)?,
-                objects: g.objects.clone(),
-                sim: Box::new(
-                    imprint_stages::ground::GroundSim::new(&g.params, &plan.base_dir)
-                        .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?,
-                ),
-            },
+            NodeSpec::Ground(g) => {
+                let sim = imprint_stages::ground::GroundSim::new(&g.params, &plan.base_dir)
+                    .map_err(|e| Error::Invalid(format!("node '{name}': {e}")))?;
+                let raster = gpu_rasterizer(want, name, gpu)?;
+                // The passes go to the GPU too, except what has no port yet: full relaxation,
+                // and taking a layer in (`accumulate`), which run on the CPU.
+                let gpu_ground = match raster {
+                    Some(_)
+                        if g.accumulate.is_none()
+                            && g.params.relaxation
+                                == imprint_stages::ground::Relaxation::Labelled =>
+                    {
+                        Some(Box::new(imprint_stages::ground::gpu::GpuGround::from_sim(
+                            gpu.expect("chosen"),
+                            &sim,
+                        )?))
+                    }
+                    Some(_) => {
+                        eprintln!(
+                            "note: node '{name}': contact view on the GPU, passes on the CPU \
+                             (full relaxation and accumulate have no GPU port yet)"
+                        );
+                        None
+                    }
+                    None => None,
+                };
+                Stage::Ground {
+                    accumulate: g.accumulate.clone(),
+                    last: None,
+                    gpu: raster,
+                    gpu_ground,
+                    objects: g.objects.clone(),
+                    sim: Box::new(sim),
+                }
+            }
             NodeSpec::WriteMesh(w) => Stage::WriteMesh {
                 input: w.mesh.clone(),
                 dir: opts.out.join(w.dir.as_deref().unwrap_or(name)),

@@ -50,6 +50,20 @@ pub struct Bottoms {
 }
 
 impl GroundGrid {
+    /// Heights in units (x fastest) as a height field in metres, for writers and renderers.
+    pub fn height_field(&self, units: &[i32]) -> imprint_core::HeightField {
+        use rayon::prelude::*;
+        imprint_core::HeightField {
+            origin: self.origin,
+            cell: self.cell,
+            dims: self.dims,
+            heights: units
+                .par_iter()
+                .map(|&h| (h as f64 * self.unit) as f32)
+                .collect(),
+        }
+    }
+
     /// Number of cells.
     pub fn len(&self) -> usize {
         self.dims.x as usize * self.dims.y as usize

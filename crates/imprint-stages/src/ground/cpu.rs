@@ -226,6 +226,26 @@ impl GroundSim {
         (self.threshold < NO_SLUMP).then_some(self.threshold)
     }
 
+    /// The material's values (for the GPU path).
+    pub(crate) fn material(&self) -> MaterialValues {
+        self.material
+    }
+
+    /// The slump's mode (for the GPU path).
+    pub(crate) fn relaxation(&self) -> Relaxation {
+        self.relaxation
+    }
+
+    /// The outer contour map's width in rings (for the GPU path).
+    pub(crate) fn band(&self) -> u32 {
+        self.band
+    }
+
+    /// Sets the frame count (a ground moved back from the GPU path).
+    pub(crate) fn set_frame(&mut self, frame: u32) {
+        self.frame = frame;
+    }
+
     /// Frames stepped so far.
     pub fn frame(&self) -> u32 {
         self.frame
@@ -238,56 +258,17 @@ impl GroundSim {
 
     /// The heights in metres as a `HeightField`, for writers and renderers.
     pub fn to_height_field(&self) -> HeightField {
-        let u = self.grid.unit;
-        HeightField {
-            origin: self.grid.origin,
-            cell: self.grid.cell,
-            dims: self.grid.dims,
-            heights: self
-                .heights
-                .par_iter()
-                .map(|&h| (h as f64 * u) as f32)
-                .collect(),
-        }
+        self.grid.height_field(&self.heights)
     }
 
     /// O §2.1-2.5 for one contact: finds the contact cells, builds both contour maps over
     /// the contact's window, presses and displaces, then (`Labelled`) slumps.
     fn press(&mut self, b: &Bottoms, m: &mut GroundFrameMetrics) {
         let nx = self.grid.dims.x;
-        let bw = b.window;
-        let (mut lo, mut hi) = (UVec2::MAX, UVec2::ZERO);
-        for y in 0..bw.h {
-            for x in 0..bw.w {
-                if b.bottom[(y * bw.w + x) as usize] < self.heights[bw.global(x, y, nx)] {
-                    lo = lo.min(UVec2::new(bw.i0 + x, bw.k0 + y));
-                    hi = hi.max(UVec2::new(bw.i0 + x, bw.k0 + y));
-                }
-            }
-        }
-        if lo.x > hi.x {
+        let Some((win, bottom)) = work_window(b, &self.heights, self.grid.dims, self.band) else {
             return;
-        }
-        // The outer map needs `band` rings; one more keeps the window's edge off them.
-        let win = Window {
-            i0: lo.x,
-            k0: lo.y,
-            w: hi.x - lo.x + 1,
-            h: hi.y - lo.y + 1,
-        }
-        .grow(self.band + 1, self.grid.dims);
+        };
         let (w, h) = (win.w as usize, win.h as usize);
-        let bottom: Vec<i32> = (0..win.len())
-            .map(|j| {
-                let (i, k) = (win.i0 + (j % w) as u32, win.k0 + (j / w) as u32);
-                let inside = i >= bw.i0 && i < bw.i0 + bw.w && k >= bw.k0 && k < bw.k0 + bw.h;
-                if inside {
-                    b.bottom[((k - bw.k0) * bw.w + (i - bw.i0)) as usize]
-                } else {
-                    NO_OBJECT
-                }
-            })
-            .collect();
         let contact: Vec<bool> = (0..win.len())
             .map(|j| bottom[j] < self.heights[win.global((j % w) as u32, (j / w) as u32, nx)])
             .collect();
@@ -587,6 +568,52 @@ impl GroundSim {
         };
         max as f32 * per_unit
     }
+}
+
+/// The frame's work window (the contact's box grown by `band` + 1 cells, clipped to the
+/// field) and the object bottoms over it ([`NO_OBJECT`] where none was rasterised); `None`
+/// when no bottom is below the ground. Shared by the CPU and GPU paths.
+pub(crate) fn work_window(
+    b: &Bottoms,
+    heights: &[i32],
+    dims: UVec2,
+    band: u32,
+) -> Option<(Window, Vec<i32>)> {
+    let nx = dims.x;
+    let bw = b.window;
+    let (mut lo, mut hi) = (UVec2::MAX, UVec2::ZERO);
+    for y in 0..bw.h {
+        for x in 0..bw.w {
+            if b.bottom[(y * bw.w + x) as usize] < heights[bw.global(x, y, nx)] {
+                lo = lo.min(UVec2::new(bw.i0 + x, bw.k0 + y));
+                hi = hi.max(UVec2::new(bw.i0 + x, bw.k0 + y));
+            }
+        }
+    }
+    if lo.x > hi.x {
+        return None;
+    }
+    // The outer map needs `band` rings; one more keeps the window's edge off them.
+    let win = Window {
+        i0: lo.x,
+        k0: lo.y,
+        w: hi.x - lo.x + 1,
+        h: hi.y - lo.y + 1,
+    }
+    .grow(band + 1, dims);
+    let w = win.w as usize;
+    let bottom = (0..win.len())
+        .map(|j| {
+            let (i, k) = (win.i0 + (j % w) as u32, win.k0 + (j / w) as u32);
+            let inside = i >= bw.i0 && i < bw.i0 + bw.w && k >= bw.k0 && k < bw.k0 + bw.h;
+            if inside {
+                b.bottom[((k - bw.k0) * bw.w + (i - bw.i0)) as usize]
+            } else {
+                NO_OBJECT
+            }
+        })
+        .collect();
+    Some((win, bottom))
 }
 
 /// What a relaxation pass moved, and the box of the cells it changed.

@@ -61,6 +61,7 @@
 pub mod contact;
 pub mod contour;
 pub mod cpu;
+pub mod gpu;
 pub mod metrics;
 pub mod params;
 

@@ -1,0 +1,432 @@
+//! The GPU ground (`shaders/ground/step.wgsl`): [`GroundSim`]'s `Labelled` frame as compute
+//! dispatches over heights kept in a GPU buffer, bit for bit the CPU's integers and metrics.
+//!
+//! One frame, and where each part runs:
+//! 1. **Contact** (CPU side, as allowed by the design): [`contact::object_bottoms_with`] with
+//!    any rasteriser (the GPU one is a closure over its context), against a CPU copy of the
+//!    heights that the frame's end refreshes from the GPU. From it the CPU takes the contact's
+//!    box and the work window, the bottoms over the window (uploaded), the removed volume, and
+//!    each contact cell's carry `round(α · removed)` (f64 arithmetic, which WGSL lacks; it
+//!    is uploaded as 64-bit integers).
+//! 2. **Press** (GPU): contact cells drop to the bottom.
+//! 3. **Contour maps** (GPU): the exact city-block distance as two separable passes (per
+//!    row, the distance along the row to the nearest seed; per column, the minimum over the
+//!    column of that plus |dy|, by a forward and a backward scan), so no iteration to a fixed
+//!    point and no change flag: the inner map (seeds outside the contact) and the outer map
+//!    (seeds on it, then `d − 1` up to the band). The deepest level and the labelled count
+//!    come back with one small read-back.
+//! 4. **Displacement** (GPU): one dispatch per level, deepest first; shares go to the next
+//!    level with 64-bit atomic adds (two u32 words), which sum the same integers in any
+//!    order; then the rim cells take what reached them.
+//! 5. **Labelled slump** (GPU): En passes × `slump_band` rings × three dispatches (steep
+//!    counts, flows from the snapshot, apply); every pass's moved units are summed with
+//!    atomics. Passes are recorded in batches of 8, and the sums read back between batches:
+//!    a pass that moves nothing leaves the heights as they were, so the passes after it move
+//!    nothing either; the next batch is skipped, and the iteration count the CPU reports (it
+//!    stops at the first such pass) is read from the per-pass sums.
+//! 6. **Metrics**: `max_slope` by an atomic max on the GPU; the heights are read back once
+//!    (the CPU copy for the next frame's contact) and the mass summed from them.
+//!
+//! Not ported: `Relaxation::Full` ([`GpuGround::new`] refuses it; use [`GroundSim`]), and
+//! [`GroundSim::add_heights`] (move the ground to the CPU and back with
+//! [`GpuGround::to_sim`] / [`GpuGround::from_sim`]).
+
+use super::contact::{self, GroundGrid};
+use super::cpu::{GroundSim, work_window};
+use super::metrics::GroundFrameMetrics;
+use super::params::{GroundParams, MaterialValues, Relaxation, invalid};
+use imprint_core::camera::Camera;
+use imprint_core::raster::{DepthMap, RasterOptions};
+use imprint_core::{Mesh, Result};
+use imprint_gpu::{Dispatch, GpuContext, record_pass, shader, submit};
+use std::path::Path;
+
+/// Stats words (see the shader): deepest inner level, labelled cells, largest labelled
+/// neighbour difference, then 64-bit sums: displaced units, and each slump pass's moved units.
+const STAT_MAX_LEVEL: usize = 0;
+const STAT_LABELLED: usize = 1;
+const STAT_MAX_DIFF: usize = 2;
+const STAT_DISPLACED: usize = 4;
+const STAT_MOVED: usize = 8;
+
+/// The shader's entry points.
+const ENTRIES: [&str; 9] = [
+    "press",
+    "dist_rows",
+    "dist_cols",
+    "displace",
+    "rim",
+    "slump_steep",
+    "slump_flow",
+    "slump_apply",
+    "slope",
+];
+
+/// Slump passes recorded between two looks at whether the last ones moved anything.
+const SLUMP_CHUNK: u32 = 8;
+
+/// The shader's `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    nx: u32,
+    i0: u32,
+    k0: u32,
+    w: u32,
+    h: u32,
+    band: u32,
+    t: u32,
+    level: u32,
+    pass_index: u32,
+    mode: u32,
+    _pad: [u32; 2],
+}
+
+/// The ground on the GPU: its heights in a storage buffer (`i32` units, x fastest).
+#[derive(Debug)]
+pub struct GpuGround {
+    grid: GroundGrid,
+    material: MaterialValues,
+    band: u32,
+    /// T in units, or `None` (θ = 90°): no slump.
+    threshold: Option<i64>,
+    frame: u32,
+    heights: wgpu::Buffer,
+    /// The heights as of the last frame's end, for the next frame's contact.
+    mirror: Vec<i32>,
+    /// The pipelines of [`ENTRIES`], in that order.
+    pipelines: Vec<wgpu::ComputePipeline>,
+}
+
+/// The frame's buffers over its work window.
+struct Frame {
+    bottom: wgpu::Buffer,
+    contact: wgpu::Buffer,
+    tmp: wgpu::Buffer,
+    inner: wgpu::Buffer,
+    outer: wgpu::Buffer,
+    carry: wgpu::Buffer,
+    steep: wgpu::Buffer,
+    delta: wgpu::Buffer,
+    stats: wgpu::Buffer,
+}
+
+impl GpuGround {
+    /// A ground as `params` state it (as [`GroundSim::new`]), on the GPU. `Full` relaxation
+    /// is refused: it has no GPU port yet.
+    pub fn new(ctx: &GpuContext, params: &GroundParams, base_dir: &Path) -> Result<Self> {
+        Self::from_sim(ctx, &GroundSim::new(params, base_dir)?)
+    }
+
+    /// Uploads a CPU ground (its heights, parameters and frame count).
+    pub fn from_sim(ctx: &GpuContext, sim: &GroundSim) -> Result<Self> {
+        if sim.relaxation() == Relaxation::Full {
+            return Err(invalid(
+                "relaxation: Full has no GPU port yet; use relaxation: Labelled on the GPU, or \
+                 the CPU ground"
+                    .into(),
+            ));
+        }
+        let grid = *sim.grid();
+        ctx.check_grid("ground heights", [grid.dims.x, grid.dims.y, 1], 4)?;
+        Ok(GpuGround {
+            grid,
+            material: sim.material(),
+            band: sim.band(),
+            threshold: sim.threshold_units(),
+            frame: sim.frame(),
+            heights: ctx.storage_buffer("ground heights", sim.heights_units())?,
+            mirror: sim.heights_units().to_vec(),
+            pipelines: ENTRIES
+                .iter()
+                .map(|entry| {
+                    ctx.pipeline(
+                        "ground step",
+                        &[shader!("common/dispatch.wgsl"), shader!("ground/step.wgsl")],
+                        entry,
+                    )
+                })
+                .collect::<Result<_>>()?,
+        })
+    }
+
+    /// The heights (units, x fastest) as of the last frame's end.
+    pub fn heights_units(&self) -> &[i32] {
+        &self.mirror
+    }
+
+    /// The ground as a height field in metres (as [`GroundSim::to_height_field`]).
+    pub fn to_height_field(&self) -> imprint_core::HeightField {
+        self.grid.height_field(&self.mirror)
+    }
+
+    /// The heights' GPU buffer (`array<i32>`, x fastest), for renderers.
+    pub fn heights_buffer(&self) -> &wgpu::Buffer {
+        &self.heights
+    }
+
+    /// The cells, their place in the world and the height unit.
+    pub fn grid(&self) -> &GroundGrid {
+        &self.grid
+    }
+
+    /// Frames stepped so far.
+    pub fn frame(&self) -> u32 {
+        self.frame
+    }
+
+    /// Σ heights, units.
+    pub fn mass(&self) -> i64 {
+        self.mirror.iter().map(|&h| h as i64).sum()
+    }
+
+    /// The same ground on the CPU, with `params` (its heights and frame count; the last
+    /// frame's contour maps are not carried): e.g. to go on with `Full` relaxation.
+    pub fn to_sim(&self, params: &GroundParams) -> Result<GroundSim> {
+        let mut sim = GroundSim::from_units(params, self.mirror.clone())?;
+        sim.set_frame(self.frame);
+        Ok(sim)
+    }
+
+    /// One frame with the CPU rasteriser for the contact view (as [`GroundSim::step`]).
+    pub fn step(&mut self, ctx: &GpuContext, objects: &[&Mesh]) -> Result<GroundFrameMetrics> {
+        self.step_with(ctx, objects, imprint_core::raster::rasterize_depth_with)
+    }
+
+    /// One frame (as [`GroundSim::step_with`]): the same heights and metrics, bit for bit.
+    pub fn step_with(
+        &mut self,
+        ctx: &GpuContext,
+        objects: &[&Mesh],
+        rasterize: impl FnMut(&Mesh, &Camera, u32, u32, &RasterOptions) -> Result<DepthMap>,
+    ) -> Result<GroundFrameMetrics> {
+        let mut m = GroundFrameMetrics {
+            frame: self.frame,
+            ..Default::default()
+        };
+        if let Some(b) = contact::object_bottoms_with(objects, &self.grid, &self.mirror, rasterize)?
+        {
+            self.press(ctx, &b, &mut m)?;
+        }
+        m.mass_units = self.mass();
+        m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
+        self.frame += 1;
+        Ok(m)
+    }
+
+    /// Steps 1-6 of the module doc for one contact.
+    fn press(
+        &mut self,
+        ctx: &GpuContext,
+        b: &contact::Bottoms,
+        m: &mut GroundFrameMetrics,
+    ) -> Result<()> {
+        let nx = self.grid.dims.x;
+        let Some((win, bottom)) = work_window(b, &self.mirror, self.grid.dims, self.band) else {
+            return Ok(());
+        };
+        let (w, n) = (win.w as usize, win.len());
+        let alpha = self.material.displace_ratio as f64;
+        let mut carry = vec![0u64; n];
+        for (j, &bot) in bottom.iter().enumerate() {
+            let h = self.mirror[win.global((j % w) as u32, (j / w) as u32, nx)];
+            if bot < h {
+                let removed = h as i64 - bot as i64;
+                m.contact_cells += 1;
+                m.removed_units += removed;
+                carry[j] = (alpha * removed as f64).round() as u64;
+            }
+        }
+        let passes = match self.threshold {
+            Some(_) => self.material.slump_iterations,
+            None => 0,
+        };
+        let f = Frame {
+            bottom: ctx.storage_buffer("ground bottoms", &bottom)?,
+            contact: ctx.zeroed_buffer("ground contact", 4 * n as u64)?,
+            tmp: ctx.zeroed_buffer("ground distance rows", 4 * n as u64)?,
+            inner: ctx.zeroed_buffer("ground inner map", 4 * n as u64)?,
+            outer: ctx.zeroed_buffer("ground outer map", 4 * n as u64)?,
+            carry: ctx.storage_buffer("ground carry", &carry)?,
+            steep: ctx.zeroed_buffer("ground steep counts", 4 * n as u64)?,
+            delta: ctx.zeroed_buffer("ground slump flows", 4 * n as u64)?,
+            stats: ctx
+                .zeroed_buffer("ground stats", 4 * (STAT_MOVED as u64 + 2 * passes as u64))?,
+        };
+        let base = Params {
+            nx,
+            i0: win.i0,
+            k0: win.k0,
+            w: win.w,
+            h: win.h,
+            band: self.band,
+            t: self.threshold.unwrap_or(0).clamp(0, i32::MAX as i64) as u32,
+            ..Default::default()
+        };
+        let pipes = &self.pipelines;
+        let pipe = |entry: &str| {
+            let i = ENTRIES
+                .iter()
+                .position(|&e| e == entry)
+                .expect("a shader entry");
+            &pipes[i]
+        };
+        let rec = |enc: &mut wgpu::CommandEncoder,
+                   entry: &str,
+                   params: Params,
+                   bufs: &[(u32, &wgpu::Buffer)],
+                   threads: u32|
+         -> Result<()> {
+            let ub = ctx.uniform_buffer("ground params", &params);
+            let mut all = vec![(0, &ub)];
+            all.extend_from_slice(bufs);
+            record_pass(
+                ctx,
+                enc,
+                entry,
+                pipe(entry),
+                &all,
+                Dispatch::Threads(threads),
+                None,
+            );
+            Ok(())
+        };
+        let encoder = |label| {
+            ctx.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+        };
+        let (hb, n32) = (&self.heights, n as u32);
+
+        // Press and both contour maps, then read back the deepest level.
+        let mut enc = encoder("ground press and contours");
+        rec(
+            &mut enc,
+            "press",
+            base,
+            &[(1, hb), (2, &f.bottom), (3, &f.contact)],
+            n32,
+        )?;
+        for mode in [0, 1] {
+            let p = Params { mode, ..base };
+            rec(
+                &mut enc,
+                "dist_rows",
+                p,
+                &[(3, &f.contact), (4, &f.tmp)],
+                win.h,
+            )?;
+            rec(
+                &mut enc,
+                "dist_cols",
+                p,
+                &[
+                    (3, &f.contact),
+                    (4, &f.tmp),
+                    (5, &f.inner),
+                    (6, &f.outer),
+                    (10, &f.stats),
+                ],
+                win.w,
+            )?;
+        }
+        submit(ctx, enc, None);
+        let stats: Vec<u32> = ctx.read_buffer(&f.stats)?;
+        let max_level = stats[STAT_MAX_LEVEL];
+        m.max_contour = max_level;
+        m.labelled_cells = stats[STAT_LABELLED];
+
+        // Displacement level by level, the rims, the slump, the slope.
+        let mut enc = encoder("ground displace and slump");
+        for l in (1..=max_level).rev() {
+            let p = Params { level: l, ..base };
+            rec(
+                &mut enc,
+                "displace",
+                p,
+                &[(5, &f.inner), (7, &f.carry)],
+                n32,
+            )?;
+        }
+        rec(
+            &mut enc,
+            "rim",
+            base,
+            &[(1, hb), (3, &f.contact), (7, &f.carry), (10, &f.stats)],
+            n32,
+        )?;
+        let wide = |s: &[u32], at: usize| s[at] as u64 | (s[at + 1] as u64) << 32;
+        for pass in 0..passes {
+            // Every SLUMP_CHUNK passes, see whether one moved nothing (then neither would
+            // the rest): a material with many passes stops early, as the CPU does.
+            if pass > 0 && pass % SLUMP_CHUNK == 0 {
+                submit(ctx, enc, None);
+                let s: Vec<u32> = ctx.read_buffer(&f.stats)?;
+                enc = encoder("ground slump");
+                if (pass - SLUMP_CHUNK..pass).any(|q| wide(&s, STAT_MOVED + 2 * q as usize) == 0) {
+                    break;
+                }
+            }
+            for k in 0..self.band {
+                let p = Params {
+                    level: k,
+                    pass_index: pass,
+                    ..base
+                };
+                rec(
+                    &mut enc,
+                    "slump_steep",
+                    p,
+                    &[(1, hb), (6, &f.outer), (8, &f.steep)],
+                    n32,
+                )?;
+                rec(
+                    &mut enc,
+                    "slump_flow",
+                    p,
+                    &[
+                        (1, hb),
+                        (6, &f.outer),
+                        (8, &f.steep),
+                        (9, &f.delta),
+                        (10, &f.stats),
+                    ],
+                    n32,
+                )?;
+                rec(
+                    &mut enc,
+                    "slump_apply",
+                    p,
+                    &[(1, hb), (6, &f.outer), (9, &f.delta)],
+                    n32,
+                )?;
+            }
+        }
+        rec(
+            &mut enc,
+            "slope",
+            base,
+            &[(1, hb), (6, &f.outer), (10, &f.stats)],
+            n32,
+        )?;
+        submit(ctx, enc, None);
+        let stats: Vec<u32> = ctx.read_buffer(&f.stats)?;
+        self.mirror = ctx.read_buffer(&self.heights)?;
+        self.mirror.truncate(self.grid.len());
+
+        let unit_volume = self.grid.unit_volume();
+        m.removed_volume = m.removed_units as f64 * unit_volume;
+        m.displaced_units = wide(&stats, STAT_DISPLACED) as i64;
+        m.displaced_volume = m.displaced_units as f64 * unit_volume;
+        for pass in 0..passes as usize {
+            let moved = wide(&stats, STAT_MOVED + 2 * pass) as i64;
+            m.slump_iterations += 1;
+            m.slump_visits += m.labelled_cells as u64;
+            m.slumped_units += moved;
+            if moved == 0 {
+                break;
+            }
+        }
+        m.max_slope = stats[STAT_MAX_DIFF] as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
+        Ok(())
+    }
+}
