@@ -13,6 +13,20 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+/// `print!` and `println!` to standard output, ending the program quietly (exit 0) when it
+/// is a closed pipe (`imprint check FILE | head`), as command-line tools do, not panicking.
+macro_rules! out {
+    ($($t:tt)*) => {
+        $crate::emit(format_args!($($t)*))
+    };
+}
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        $crate::emit(format_args!($($t)*));
+        $crate::emit(format_args!("\n"));
+    }};
+}
+
 mod sweep;
 
 #[derive(Parser)]
@@ -162,6 +176,19 @@ fn main() -> ExitCode {
     }
 }
 
+/// Writes to standard output (see `out!`).
+pub(crate) fn emit(text: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout.write_fmt(text).and_then(|_| stdout.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: cannot write to standard output: {e}");
+        std::process::exit(1);
+    }
+}
+
 fn report_error(e: &Error) {
     match e {
         Error::Pipeline(p) => {
@@ -196,12 +223,12 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
         }
         Command::Check { file, sets } => {
             let plan = imprint_graph::load(&file, &sets)?;
-            print!("{}", describe(&plan));
+            out!("{}", describe(&plan));
             Ok(())
         }
         Command::Graph { file, .. } => {
             let plan = imprint_graph::load(&file, &[])?;
-            print!("{}", plan.dot());
+            out!("{}", plan.dot());
             Ok(())
         }
         Command::Sweep(args) => sweep::sweep(&args),
@@ -215,7 +242,7 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             sets,
         } => {
             let plan = imprint_graph::load(&file, &sets)?;
-            print!(
+            out!(
                 "{}",
                 stress_cloth(&plan, node.as_deref(), &scales, &ratios, frames)?
             );
@@ -350,8 +377,8 @@ fn run_plan(
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
-    println!("{}", report.table(&plan.order));
-    println!(
+    outln!("{}", report.table(&plan.order));
+    outln!(
         "{} file(s) written; report: {}",
         report.files_written,
         out.join("report.json").display()

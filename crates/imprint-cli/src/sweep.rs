@@ -336,7 +336,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     let cached = match cache.load() {
         Ok(r) => r,
         Err(why) => {
-            println!("reference: the cache cannot be used ({why}); running it again");
+            outln!("reference: the cache cannot be used ({why}); running it again");
             None
         }
     };
@@ -348,7 +348,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     };
     let reference = match cached {
         Some(r) => {
-            println!(
+            outln!(
                 "reference: reusing the cached run in {} (same pipeline text, frames and \
                  backend; delete it to run the reference again)",
                 cache.dir.display()
@@ -446,13 +446,13 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                 &points,
             )?;
         }
-        None => println!(
+        None => outln!(
             "no node with an error metric (DistanceField, Cloth, Heightmap) ran: sweep.png not \
              written"
         ),
     }
-    print!("{md}");
-    println!(
+    out!("{md}");
+    outln!(
         "wrote {}, {}, {} and {}",
         out.join("sweep.csv").display(),
         out.join("sweep.md").display(),
@@ -515,7 +515,7 @@ fn progress_bar(len: u64) -> ProgressBar {
 
 /// A line on stdout, above the bar (`ProgressBar::println` says nothing when it is hidden).
 fn say(bar: &ProgressBar, line: String) {
-    bar.suspend(|| println!("{line}"));
+    bar.suspend(|| outln!("{line}"));
 }
 
 /// Shows the setting and its frame on the bar.

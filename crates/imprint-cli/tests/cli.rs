@@ -892,7 +892,11 @@ fn gpu_ground_and_snow_agree_with_the_cpu() {
     }
     // `bare` runs its passes on the GPU too (`GpuGround`); `sand` takes snow in, which has
     // no GPU port, so only its contact view is on the GPU.
-    for (dir, stem, tol) in [("h", "sand", 2e-5f32), ("s", "fall", 2e-5), ("b", "bare", 2e-5)] {
+    for (dir, stem, tol) in [
+        ("h", "sand", 2e-5f32),
+        ("s", "fall", 2e-5),
+        ("b", "bare", 2e-5),
+    ] {
         let read = |run: &str| {
             imprint_render::npy::read_npy_f32(
                 &c.dir.path().join(format!("{run}/{dir}/{stem}_0011.npy")),

@@ -130,8 +130,10 @@ enum Stage {
         meshes: Vec<String>,
         sim: Box<imprint_stages::snow::SnowSim>,
         ground: Option<HeightField>,
-        /// The GPU rasteriser for the depth maps, when the node runs on the GPU.
+        /// The GPU rasteriser for the depth maps, when the node runs on the GPU, and the
+        /// look-ups and slides there too.
         gpu: Option<Box<GpuRasterizer>>,
+        gpu_relax: Box<imprint_stages::snow::gpu::GpuSnowRelax>,
     },
     Heightmap {
         input: String,
@@ -587,6 +589,7 @@ pub fn run_observed(
                     sim,
                     ground,
                     gpu: raster,
+                    gpu_relax,
                 } => {
                     let ms: Vec<Arc<Mesh>> = meshes
                         .iter()
@@ -598,9 +601,27 @@ pub fn run_observed(
                     let refs: Vec<&Mesh> = ms.iter().map(|m| &**m).collect();
                     let dt = 1.0 / plan.file.fps;
                     let step = match raster {
-                        Some(r) => sim.step_with(&refs, ground.as_ref(), dt, |m, cam, w, h, o| {
-                            r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
-                        }),
+                        // Depth maps, look-ups and slides on the GPU; the deposit on the CPU.
+                        Some(r) => {
+                            let ctx = gpu.expect("GPU chosen at build");
+                            let mut look_ups = imprint_stages::snow::gpu::GpuSnowArrival::new();
+                            sim.step_with_parts(
+                                &refs,
+                                ground.as_ref(),
+                                dt,
+                                |occluder, receivers, directions, params| {
+                                    look_ups.arrival_with(
+                                        ctx,
+                                        occluder,
+                                        receivers,
+                                        directions,
+                                        params,
+                                        |m, cam, w, h, o| r.depth_map(ctx, m, cam, w, h, o),
+                                    )
+                                },
+                                gpu_relax.relaxer(ctx),
+                            )
+                        }
                         None => sim.step(&refs, ground.as_ref(), dt),
                     }
                     .map_err(|e| Error::Invalid(format!("node '{name}', frame {frame}: {e}")))?;
@@ -1342,6 +1363,7 @@ fn build_stages(
                 ),
                 ground: n.ground.as_ref().map(snow_ground).transpose()?,
                 gpu: gpu_rasterizer(want, name, gpu)?,
+                gpu_relax: Box::new(imprint_stages::snow::gpu::GpuSnowRelax::new()),
             },
             NodeSpec::Ground(g) => {
                 let sim = imprint_stages::ground::GroundSim::new(&g.params, &plan.base_dir)

@@ -184,18 +184,18 @@ pub fn snow_camera(bounds: &Aabb, dir: Vec3, resolution: u32) -> Result<Camera> 
 /// A depth map's projection, set up once for many points (the rasteriser's pixel convention,
 /// `DepthMap::pixel_of`, for a square orthographic map).
 #[derive(Clone, Copy, Debug)]
-struct Lookup {
-    frame: Frame,
+pub(crate) struct Lookup {
+    pub(crate) frame: Frame,
     /// Pixels per world unit.
-    k: f32,
+    pub(crate) k: f32,
     /// Half the image side, pixels.
-    centre: f32,
-    res: u32,
-    texel: f32,
+    pub(crate) centre: f32,
+    pub(crate) res: u32,
+    pub(crate) texel: f32,
 }
 
 impl Lookup {
-    fn new(map: &DepthMap) -> Self {
+    pub(crate) fn new(map: &DepthMap) -> Self {
         let half_height = map.camera.half_height_scale();
         let k = map.height as f32 / (2.0 * half_height);
         Lookup {

@@ -24,7 +24,7 @@
 //! have pressed prints into it); snow lies on it, and the surface seen by the depth maps and
 //! the output is bare ground + snow.
 
-use super::arrival::{Arrival, arrival_with, fall_directions, gather, vertex_normals};
+use super::arrival::{Arrival, Receivers, arrival_with, fall_directions, gather, vertex_normals};
 use super::params::SnowParams;
 use super::relax::{self, MAX_CELL_UNITS, QUANTUM, RelaxReport, Scratch};
 use glam::{UVec2, Vec3};
@@ -227,6 +227,32 @@ impl SnowSim {
         dt: f32,
         rasterize: impl FnMut(&Mesh, &Camera, u32, u32, &RasterOptions) -> Result<DepthMap>,
     ) -> Result<SnowStep> {
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let step = self.step_with_parts(
+            meshes,
+            ground,
+            dt,
+            |occluder, receivers, directions, params| {
+                arrival_with(occluder, receivers, directions, params, rasterize)
+            },
+            |g, tan, units, passes| Ok(relax::relax(g, tan, units, passes, &mut scratch)),
+        );
+        self.scratch = scratch;
+        step
+    }
+
+    /// [`Self::step_with`] with the parts given: `arrival` counts the receivers reached (the
+    /// contract of [`arrival_with`]; e.g. the GPU's `super::gpu::GpuSnowArrival`), `relax`
+    /// stabilises the ground's snow as in [`Self::relax_with`] (e.g. the GPU's
+    /// `super::gpu::GpuSnowRelax::relaxer`). The deposit stays here.
+    pub fn step_with_parts(
+        &mut self,
+        meshes: &[&Mesh],
+        ground: Option<&HeightField>,
+        dt: f32,
+        arrival: impl FnOnce(&Mesh, &Receivers, &[Vec3], &SnowParams) -> Result<Arrival>,
+        relax: impl FnMut(&HeightField, f32, &mut Vec<u32>, u32) -> Result<RelaxReport>,
+    ) -> Result<SnowStep> {
         if !(dt.is_finite() && dt >= 0.0) {
             return Err(Error::Invalid(format!(
                 "snow: step duration {dt} must be a finite number >= 0"
@@ -244,13 +270,15 @@ impl SnowSim {
         }
         let surface = self.ground.as_ref().map(GroundSnow::surface);
         let (occluder, receivers) = gather(meshes, surface.as_ref());
-        let arrival = arrival_with(
-            &occluder,
-            &receivers,
-            &self.directions,
-            &self.params,
-            rasterize,
-        )?;
+        let arrival = arrival(&occluder, &receivers, &self.directions, &self.params)?;
+        if arrival.counts.len() != receivers.points.len() || arrival.directions == 0 {
+            return Err(Error::Invalid(format!(
+                "snow: the arrival gave {} counts over {} directions for {} receivers",
+                arrival.counts.len(),
+                arrival.directions,
+                receivers.points.len()
+            )));
+        }
 
         let fall = self.params.fall();
         let gain = self.params.rate * dt;
@@ -303,7 +331,7 @@ impl SnowSim {
         let directions = arrival.directions;
         self.arrival = Some(arrival);
         self.time += dt as f64;
-        let relax = self.relax(self.params.relax_passes);
+        let relax = self.relax_with(self.params.relax_passes, relax)?;
         Ok(SnowStep {
             directions,
             reached,
@@ -319,6 +347,20 @@ impl SnowSim {
                 relax::relax(&g.base, tan, &mut g.units, passes, &mut self.scratch)
             }
             _ => RelaxReport::default(),
+        }
+    }
+
+    /// [`Self::relax`] done by `relax`, called as `relax(bare ground, tan θ, units, passes)`
+    /// with the contract of [`relax::relax`] (e.g. the GPU's
+    /// `super::gpu::GpuSnowRelax::relaxer`, which leaves the same quanta to the bit).
+    pub fn relax_with(
+        &mut self,
+        passes: u32,
+        mut relax: impl FnMut(&HeightField, f32, &mut Vec<u32>, u32) -> Result<RelaxReport>,
+    ) -> Result<RelaxReport> {
+        match (&mut self.ground, self.params.tan_repose()) {
+            (Some(g), Some(tan)) => relax(&g.base, tan, &mut g.units, passes),
+            _ => Ok(RelaxReport::default()),
         }
     }
 

@@ -33,7 +33,9 @@
 //!   which a `Ground` node then prints objects into fresh snow).
 //!
 //! Read in this order: [`params`] (what a pipeline file says), [`arrival`] (depth maps and
-//! probabilities), [`cpu`] (deposit and outputs, [`SnowSim`]), [`relax`] (stabilisation).
+//! probabilities), [`cpu`] (deposit and outputs, [`SnowSim`]), [`relax`] (stabilisation),
+//! [`gpu`] (the stabilisation on the GPU, bit-identical to [`relax`], and the arrival
+//! look-ups).
 //!
 //! ```
 //! use imprint_stages::snow::{SnowParams, SnowSim};
@@ -57,6 +59,7 @@
 
 pub mod arrival;
 pub mod cpu;
+pub mod gpu;
 pub mod params;
 pub mod relax;
 

@@ -1,0 +1,72 @@
+// The arrival look-ups of one fall direction, the GPU twin of
+// imprint_stages::snow::arrival::reaches: one invocation per receiver (mesh vertices, then
+// ground cells) compares its view depth with the depth map's texel its projection falls in,
+// with the bias texel × (bias_texels + min(tan β, 8)), and adds 1 to its own count when
+// reached (no atomics: each invocation owns its count). The host dispatches once per
+// direction, with that direction's map and `LookupParams`.
+// Prepended: common/dispatch.wgsl.
+//
+// f32 as on the CPU, but dot products and the projection may be fused by the shader
+// compiler, and the slope's division may be less exact than the CPU's, so a receiver exactly
+// at a texel edge or on the bias threshold can flip (see snow::gpu).
+
+struct LookupParams {
+    // The map camera's frame (xyz; w unused).
+    eye: vec4<f32>,
+    right: vec4<f32>,
+    up: vec4<f32>,
+    forward: vec4<f32>,
+    // The fall direction (xyz).
+    dir: vec4<f32>,
+    // Pixels per world unit, half the image side in pixels, texel size, bias_texels.
+    k: f32,
+    centre: f32,
+    texel: f32,
+    bias_texels: f32,
+    res: u32,
+    receivers: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> lp: LookupParams;
+// Per receiver: xyz position (w unused), then xyz normal (w unused).
+@group(0) @binding(1) var<storage, read> points: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> normals: array<vec4<f32>>;
+// View depth per texel, row-major from the top row; UNCOVERED where no triangle covers it.
+@group(0) @binding(3) var<storage, read> depth_map: array<f32>;
+@group(0) @binding(4) var<storage, read_write> counts: array<u32>;
+
+const MAX_BIAS_SLOPE: f32 = 8.0;
+// f32::MAX (not +inf, which a compiler may assume away).
+const UNCOVERED: f32 = 3.40282347e38;
+
+@compute @workgroup_size(64)
+fn lookup(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let r = thread_index(gid, nwg);
+    if r >= lp.receivers {
+        return;
+    }
+    let n = normals[r].xyz;
+    let c = -dot(n, lp.dir.xyz);
+    // `!(c > 0)` also refuses NaN.
+    if !(c > 0.0) {
+        return;
+    }
+    let q = points[r].xyz - lp.eye.xyz;
+    let v = vec3<f32>(dot(q, lp.right.xyz), dot(q, lp.up.xyz), dot(q, lp.forward.xyz));
+    let px = lp.centre + v.x * lp.k;
+    let py = lp.centre - v.y * lp.k;
+    let last = f32(lp.res) - 1.0;
+    let i = u32(clamp(floor(px), 0.0, last));
+    let j = u32(clamp(floor(py), 0.0, last));
+    let seen = depth_map[j * lp.res + i];
+    var reached = true;
+    if seen != UNCOVERED {
+        let tan = min(sqrt(max(1.0 - c * c, 0.0)) / c, MAX_BIAS_SLOPE);
+        reached = v.z <= seen + lp.texel * (lp.bias_texels + tan);
+    }
+    if reached {
+        counts[r] += 1u;
+    }
+}
