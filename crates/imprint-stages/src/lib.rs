@@ -5,6 +5,7 @@
 mod bare_option;
 pub mod cloth;
 pub mod depth;
+pub mod drape;
 pub mod ground;
 pub mod mesh;
 pub mod metrics;

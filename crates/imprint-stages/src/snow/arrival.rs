@@ -209,7 +209,7 @@ impl Lookup {
 
     /// Pixel coordinates (x right, y down) and view depth of a world point.
     #[inline]
-    fn project(&self, p: Vec3) -> (f32, f32, f32) {
+    pub(crate) fn project(&self, p: Vec3) -> (f32, f32, f32) {
         let v = self.frame.to_view(p);
         (self.centre + v.x * self.k, self.centre - v.y * self.k, v.z)
     }

@@ -1,0 +1,265 @@
+//! The one-shot fit on the CPU: depth maps of the body per view, the exact inside test, the
+//! pushes and their check, and the distance-field fallback (see the module doc of
+//! [`super`] for the method and the definitions).
+
+use super::inside::InsideTest;
+use super::params::{DrapeParams, Fallback};
+use crate::snow::arrival::{Lookup, snow_camera};
+use glam::Vec3;
+use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
+use imprint_core::{BoundaryVariant, DistanceField, GridSpec, Mesh, Result, Sampling};
+use rayon::prelude::*;
+
+/// What one call did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DrapeReport {
+    /// Garment vertices given.
+    pub vertices: usize,
+    /// Vertices inside the body before the call (the exact inside test).
+    pub inside: usize,
+    /// Vertices whose position changed.
+    pub moved: usize,
+    /// Inside vertices no view resolved (before any fallback).
+    pub unresolved_by_views: usize,
+    /// Of those, the ones the fallback resolved.
+    pub resolved_by_fallback: usize,
+    /// Inside vertices left unresolved after the fallback (left where they were).
+    pub unresolved: usize,
+    /// Longest push applied, m.
+    pub max_push: f32,
+    /// The largest depth-map texel of the views, m (the resolution of the fit).
+    pub texel: f32,
+}
+
+/// Two depth maps of the body along one view: `front` looks along `dir`, `back` against it.
+struct View {
+    dir: Vec3,
+    front: DepthMap,
+    front_look: Lookup,
+    back: DepthMap,
+    back_look: Lookup,
+}
+
+/// The push of one view for one vertex: unit direction and length (offset included).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Push {
+    pub dir: Vec3,
+    pub length: f32,
+}
+
+/// The surface depth a push goes to: the smallest covered depth of the 2×2 texels around the
+/// projection (conservative near silhouettes, where the depth changes fast across a texel),
+/// provided the texel the point falls in is covered and the point lies behind it. `None`
+/// when the point is not behind the surface this map sees.
+fn behind(map: &DepthMap, look: &Lookup, p: Vec3) -> Option<f32> {
+    let (px, py, depth) = look.project(p);
+    let last = look.res as f32 - 1.0;
+    if !(px >= 0.0 && py >= 0.0 && px <= last + 1.0 && py <= last + 1.0) {
+        return None;
+    }
+    let i = px.floor().clamp(0.0, last) as u32;
+    let j = py.floor().clamp(0.0, last) as u32;
+    let seen = map.get(i, j)?;
+    if depth <= seen {
+        return None;
+    }
+    let i0 = (px - 0.5).floor().max(0.0) as u32;
+    let j0 = (py - 0.5).floor().max(0.0) as u32;
+    let mut nearest = seen;
+    for (a, b) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        if let Some(d) = map.get(i0 + a, j0 + b) {
+            nearest = nearest.min(d);
+        }
+    }
+    Some(depth - nearest)
+}
+
+impl View {
+    /// The push of this view for `p`, when it sees `p` inside: to the nearer of the two
+    /// surfaces, plus `offset`.
+    fn push(&self, p: Vec3, offset: f32) -> Option<Push> {
+        let f = behind(&self.front, &self.front_look, p)?;
+        let b = behind(&self.back, &self.back_look, p)?;
+        Some(if f <= b {
+            Push {
+                dir: -self.dir,
+                length: f + offset,
+            }
+        } else {
+            Push {
+                dir: self.dir,
+                length: b + offset,
+            }
+        })
+    }
+}
+
+/// The one-shot fit on the CPU: pushes the garment's vertices out of the body in place and
+/// reports what it did. The body should be closed (see the module doc); the garment is any
+/// set of points (a mesh's positions, a cloth's particles).
+pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Result<DrapeReport> {
+    params.validate()?;
+    let mut report = DrapeReport {
+        vertices: garment.len(),
+        ..Default::default()
+    };
+    let bounds = body.bounds();
+    if garment.is_empty() || body.triangles.is_empty() || bounds.is_empty() {
+        return Ok(report);
+    }
+    let res = params.resolution;
+    let mut views = Vec::with_capacity(params.views.len());
+    for dir in params.directions() {
+        let map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
+            let cam = snow_camera(&bounds, d, res)?;
+            let m = rasterize_depth_with(body, &cam, res, res, &RasterOptions::default())?;
+            let look = Lookup::new(&m);
+            Ok((m, look))
+        };
+        let (front, front_look) = map(dir)?;
+        let (back, back_look) = map(-dir)?;
+        report.texel = report.texel.max(front_look.texel).max(back_look.texel);
+        views.push(View {
+            dir,
+            front,
+            front_look,
+            back,
+            back_look,
+        });
+    }
+    let texel = report.texel;
+    let test = InsideTest::new(body);
+    let offset = params.offset;
+
+    // Per vertex: None = outside (untouched); Some(Ok(new)) = resolved; Some(Err(())) =
+    // inside and unresolved by the views.
+    let outcome: Vec<Option<std::result::Result<Vec3, ()>>> = garment
+        .par_iter()
+        .with_min_len(256)
+        .map(|&p| {
+            if !test.inside(p) {
+                return None;
+            }
+            let best = views
+                .iter()
+                .filter_map(|v| v.push(p, offset))
+                .min_by(|a, b| a.length.total_cmp(&b.length));
+            Some(match best {
+                Some(push) if leaves_cleanly(&test, p, push, texel) => {
+                    Ok(p + push.dir * push.length)
+                }
+                _ => Err(()),
+            })
+        })
+        .collect();
+
+    let mut unresolved: Vec<usize> = Vec::new();
+    for (i, o) in outcome.iter().enumerate() {
+        match o {
+            None => {}
+            Some(Ok(q)) => {
+                report.inside += 1;
+                apply(&mut report, &mut garment[i], *q);
+            }
+            Some(Err(())) => {
+                report.inside += 1;
+                unresolved.push(i);
+            }
+        }
+    }
+    report.unresolved_by_views = unresolved.len();
+
+    if let (Fallback::DistanceField { resolution, band }, false) =
+        (params.fallback, unresolved.is_empty())
+    {
+        let field = body_field(body, resolution, band)?;
+        let step = field.spec.cell.min(texel);
+        let fixed: Vec<Option<Vec3>> = unresolved
+            .par_iter()
+            .map(|&i| field_push(&field, garment[i], offset))
+            .map(|(p, candidates)| {
+                candidates
+                    .into_iter()
+                    .flatten()
+                    .find(|push| leaves_cleanly(&test, p, *push, step))
+                    .map(|push| p + push.dir * push.length)
+            })
+            .collect();
+        for (&i, q) in unresolved.iter().zip(fixed) {
+            if let Some(q) = q {
+                report.resolved_by_fallback += 1;
+                apply(&mut report, &mut garment[i], q);
+            }
+        }
+    }
+    report.unresolved = report.unresolved_by_views - report.resolved_by_fallback;
+    Ok(report)
+}
+
+fn apply(report: &mut DrapeReport, p: &mut Vec3, q: Vec3) {
+    if q != *p {
+        report.moved += 1;
+        report.max_push = report.max_push.max((q - *p).length());
+        *p = q;
+    }
+}
+
+/// Whether the straight path of a push leaves the body once and for all: sampled every half
+/// `texel` from `p` to half a texel past the pushed point, no sample is inside once one has
+/// been outside, and the last one is outside. Gaps thinner than half a texel are not seen.
+fn leaves_cleanly(test: &InsideTest, p: Vec3, push: Push, texel: f32) -> bool {
+    let h = 0.5 * texel;
+    let end = push.length + h;
+    let steps = ((end / h).ceil() as usize).clamp(1, 1 << 16);
+    let mut left = false;
+    for k in 1..=steps {
+        let t = end * k as f32 / steps as f32;
+        let inside = test.inside(p + push.dir * t);
+        if inside && left {
+            return false;
+        }
+        left |= !inside;
+    }
+    left
+}
+
+/// The fallback's two candidate pushes for `p`, best first: to the closest point of the
+/// triangles that the (up to 8) in-band cells around `p` own, evaluated at `p` itself (exact
+/// where one of them is `p`'s nearest triangle: near edges and corners, where the blended
+/// vector is not), then along the field's blended closest-point vector ("A" sampling).
+fn field_push(field: &DistanceField, p: Vec3, offset: f32) -> (Vec3, [Option<Push>; 2]) {
+    let to_push = |v: Vec3| {
+        let len = v.length();
+        (len > 1e-9 && len.is_finite()).then(|| Push {
+            dir: v / len,
+            length: len + offset,
+        })
+    };
+    let spec = &field.spec;
+    let base = spec.to_cell(p).floor().as_ivec3();
+    let mut best: Option<Vec3> = None;
+    for k in 0..8 {
+        let c = base + glam::IVec3::new(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        if !spec.contains(c) {
+            continue;
+        }
+        let n = field.nearest[spec.index(c.as_uvec3())];
+        if n == DistanceField::FAR {
+            continue;
+        }
+        let q = field.closest_point(n as usize, p) - p;
+        if best.is_none_or(|b| q.length_squared() < b.length_squared()) {
+            best = Some(q);
+        }
+    }
+    let s = field.sample(p, Sampling::Vector);
+    let blended = if s.in_band { to_push(s.vector) } else { None };
+    (p, [best.and_then(to_push), blended])
+}
+
+/// The body's distance field for the fallback (the voxel and sdf stages' CPU paths).
+pub fn body_field(body: &Mesh, resolution: u32, band: f32) -> Result<DistanceField> {
+    let spec = GridSpec::fit(&body.bounds(), resolution, 0.05)?;
+    let boundary = crate::voxel::voxelize_cpu(body, &spec, BoundaryVariant::Closest)?;
+    crate::sdf::build_field_cpu(&boundary, band)
+}
