@@ -920,3 +920,37 @@ fn gpu_ground_and_snow_agree_with_the_cpu() {
     assert_eq!(report["nodes"]["fall"]["backend"], "gpu");
     assert_eq!(report["nodes"]["bare"]["backend"], "gpu");
 }
+
+/// The Drape node fits a sphere of radius 0.27 out of a sphere of radius 0.3: every vertex
+/// ends at the surface or beyond (within a texel), and the report counts them.
+#[test]
+fn drape_node_pushes_a_garment_out_of_the_body() {
+    let nodes = r#"        "body": Mesh(primitive: Sphere(radius: 0.3, segments: 64, rings: 32)),
+        "shell": Mesh(primitive: Sphere(radius: 0.27, segments: 24, rings: 12)),
+        "fit": Drape(body: "body", garment: "shell", params: (resolution: 128, offset: 0.0)),
+        "obj": WriteMesh(mesh: "fit"),"#;
+    let c = case(nodes);
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let d = c.dir.path().join("o");
+    let m = imprint_core::Mesh::load_obj(&d.join("obj/fit_0000.obj")).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let f = &report["nodes"]["fit"]["metrics"]["per_frame"][0];
+    let texel = f["texel"].as_f64().unwrap() as f32;
+    assert_eq!(f["inside"], f["vertices"], "{f}");
+    assert_eq!(f["unresolved"], 0, "{f}");
+    // The body is a polygon sphere: its faces lie up to r(1 - cos(π/64)) inside r.
+    let flat = 0.3 * (1.0 - (std::f32::consts::PI / 64.0).cos());
+    for p in &m.positions {
+        assert!(
+            p.length() >= 0.3 - flat - texel,
+            "{} from the centre",
+            p.length()
+        );
+    }
+    // Only frame 0 computes: both meshes are static.
+    assert_eq!(report["nodes"]["fit"]["runs"], 1);
+}

@@ -125,6 +125,12 @@ enum Stage {
         /// The ground's passes on the GPU too (heights kept there), when they can be.
         gpu_ground: Option<Box<imprint_stages::ground::gpu::GpuGround>>,
     },
+    /// A garment fitted out of a body, every frame the body or garment changes.
+    Drape {
+        body: String,
+        garment: String,
+        params: imprint_stages::drape::DrapeParams,
+    },
     /// Snow building up on meshes (and a flat ground) over the run.
     Snow {
         meshes: Vec<String>,
@@ -650,6 +656,34 @@ pub fn run_observed(
                     bump(&mut versions, name);
                     began = true;
                     true
+                }
+                Stage::Drape {
+                    body,
+                    garment,
+                    params,
+                } => {
+                    if first_run || changed {
+                        began = true;
+                        let (Some(Value::Mesh(b)), Some(Value::Mesh(g))) =
+                            (values.get(body.as_str()), values.get(garment.as_str()))
+                        else {
+                            unreachable!("edges are typed")
+                        };
+                        let mut fitted = (**g).clone();
+                        let r = imprint_stages::drape::drape_cpu(b, &mut fitted.positions, params)
+                            .map_err(|e| {
+                                Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
+                            })?;
+                        fitted.compute_normals();
+                        let mut m = serde_json::to_value(&r).expect("plain data");
+                        m["frame"] = frame.into();
+                        push_per_frame(nr, m);
+                        values.insert(name.clone(), Value::Mesh(Arc::new(fitted)));
+                        bump(&mut versions, name);
+                        true
+                    } else {
+                        false
+                    }
                 }
                 Stage::WriteField { .. }
                 | Stage::WriteMesh { .. }
@@ -1355,6 +1389,11 @@ fn build_stages(
                     every: w.every,
                 }
             }
+            NodeSpec::Drape(d) => Stage::Drape {
+                body: d.body.clone(),
+                garment: d.garment.clone(),
+                params: d.params.clone(),
+            },
             NodeSpec::Snow(n) => Stage::Snow {
                 meshes: n.meshes.clone(),
                 sim: Box::new(

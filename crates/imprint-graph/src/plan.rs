@@ -398,6 +398,11 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             }
         }
         NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => {}
+        NodeSpec::Drape(d) => {
+            d.params
+                .validate()
+                .map_err(|e| fail("params", e.to_string()))?;
+        }
         NodeSpec::Snow(n) => {
             n.params
                 .validate()

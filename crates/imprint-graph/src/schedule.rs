@@ -93,9 +93,11 @@ impl NodeSpec {
             NodeSpec::WriteMesh(w) => (w.every, w.offset),
             NodeSpec::WriteHeightmap(w) => (w.every, w.offset),
             NodeSpec::Render(r) => (r.every, r.offset),
-            NodeSpec::Mesh(_) | NodeSpec::Cloth(_) | NodeSpec::Ground(_) | NodeSpec::Snow(_) => {
-                (1, 0)
-            }
+            NodeSpec::Mesh(_)
+            | NodeSpec::Cloth(_)
+            | NodeSpec::Ground(_)
+            | NodeSpec::Snow(_)
+            | NodeSpec::Drape(_) => (1, 0),
         };
         let (split, interpolate) = match self {
             NodeSpec::DistanceField(f) => (f.split, f.interpolate),
@@ -123,6 +125,7 @@ impl NodeSpec {
             NodeSpec::Render(r) => r.enabled,
             NodeSpec::Ground(g) => g.enabled,
             NodeSpec::Snow(n) => n.enabled,
+            NodeSpec::Drape(d) => d.enabled,
         }
     }
 }

@@ -5,6 +5,7 @@ use imprint_core::BoundaryVariant;
 use imprint_render::slice::SliceOptions;
 use imprint_stages::cloth::ClothParams;
 use imprint_stages::depth::HeightView;
+use imprint_stages::drape::DrapeParams;
 use imprint_stages::ground::GroundParams;
 use imprint_stages::mesh::MeshParams;
 use imprint_stages::snow::SnowParams;
@@ -74,6 +75,25 @@ pub enum NodeSpec {
     /// Mesh; output: with `ground`, the ground's surface with its snow as a HeightField;
     /// without, the first mesh with its snow as a Mesh).
     Snow(SnowNode),
+    /// Tokoi's depth-buffer draping: a garment's vertices inside a body pushed out along the
+    /// views' depth maps (a distance field for what no view resolves) (inputs: body and
+    /// garment Mesh; output: the fitted garment as a Mesh).
+    Drape(DrapeNode),
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DrapeNode {
+    /// The Mesh node the garment must not enter (closed; it may deform).
+    pub body: String,
+    /// The Mesh node to fit (a garment mesh, or a Cloth node's output).
+    pub garment: String,
+    /// Views, resolution, offset, fallback: `imprint_stages::drape::DrapeParams`.
+    #[serde(default)]
+    pub params: DrapeParams,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -593,6 +613,7 @@ impl NodeSpec {
             NodeSpec::Render(_) => "Render",
             NodeSpec::Ground(_) => "Ground",
             NodeSpec::Snow(_) => "Snow",
+            NodeSpec::Drape(_) => "Drape",
         }
     }
 
@@ -620,6 +641,10 @@ impl NodeSpec {
                         .map(|a| ("accumulate", a.as_str(), PortType::HeightField)),
                 )
                 .collect(),
+            NodeSpec::Drape(d) => vec![
+                ("body", &d.body, PortType::Mesh),
+                ("garment", &d.garment, PortType::Mesh),
+            ],
             NodeSpec::Snow(n) => n
                 .meshes
                 .iter()
@@ -651,7 +676,7 @@ impl NodeSpec {
             NodeSpec::Cloth(_) => Some(PortType::Mesh),
             NodeSpec::Heightmap(_) | NodeSpec::Ground(_) => Some(PortType::HeightField),
             NodeSpec::Snow(n) if n.ground.is_some() => Some(PortType::HeightField),
-            NodeSpec::Snow(_) => Some(PortType::Mesh),
+            NodeSpec::Snow(_) | NodeSpec::Drape(_) => Some(PortType::Mesh),
             NodeSpec::WriteField(_)
             | NodeSpec::WriteMesh(_)
             | NodeSpec::WriteHeightmap(_)

@@ -11,7 +11,7 @@ use imprint_core::{BoundaryVariant, DistanceField, GridSpec, Mesh, Result, Sampl
 use rayon::prelude::*;
 
 /// What one call did.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct DrapeReport {
     /// Garment vertices given.
     pub vertices: usize,
