@@ -130,6 +130,8 @@ enum Stage {
         body: String,
         garment: String,
         params: imprint_stages::drape::DrapeParams,
+        /// The GPU rasteriser for the views, when the node runs on the GPU.
+        gpu: Option<Box<GpuRasterizer>>,
     },
     /// Snow building up on meshes (and a flat ground) over the run.
     Snow {
@@ -225,9 +227,10 @@ pub fn run_observed(
         let node = &plan.file.nodes[name];
         let on_gpu = match &stages[name] {
             Stage::Voxelize { gpu, .. } | Stage::Field { gpu, .. } => *gpu,
-            Stage::Heightmap { gpu, .. } | Stage::Ground { gpu, .. } | Stage::Snow { gpu, .. } => {
-                gpu.is_some()
-            }
+            Stage::Heightmap { gpu, .. }
+            | Stage::Ground { gpu, .. }
+            | Stage::Snow { gpu, .. }
+            | Stage::Drape { gpu, .. } => gpu.is_some(),
             Stage::Render { gpu, .. } => gpu.is_some(),
             Stage::Cloth { gpu, .. } => gpu.is_some(),
             _ => false,
@@ -661,6 +664,7 @@ pub fn run_observed(
                     body,
                     garment,
                     params,
+                    gpu: raster,
                 } => {
                     if first_run || changed {
                         began = true;
@@ -670,10 +674,22 @@ pub fn run_observed(
                             unreachable!("edges are typed")
                         };
                         let mut fitted = (**g).clone();
-                        let r = imprint_stages::drape::drape_cpu(b, &mut fitted.positions, params)
-                            .map_err(|e| {
-                                Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
-                            })?;
+                        let r = match raster {
+                            Some(r) => imprint_stages::drape::drape_with(
+                                b,
+                                &mut fitted.positions,
+                                params,
+                                |m, cam, w, h, o| {
+                                    r.depth_map(gpu.expect("GPU chosen at build"), m, cam, w, h, o)
+                                },
+                            ),
+                            None => {
+                                imprint_stages::drape::drape_cpu(b, &mut fitted.positions, params)
+                            }
+                        }
+                        .map_err(|e| {
+                            Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
+                        })?;
                         fitted.compute_normals();
                         let mut m = serde_json::to_value(&r).expect("plain data");
                         m["frame"] = frame.into();
@@ -1393,6 +1409,7 @@ fn build_stages(
                 body: d.body.clone(),
                 garment: d.garment.clone(),
                 params: d.params.clone(),
+                gpu: gpu_rasterizer(want, name, gpu)?,
             },
             NodeSpec::Snow(n) => Stage::Snow {
                 meshes: n.meshes.clone(),

@@ -91,6 +91,9 @@ pub struct DrapeNode {
     /// Views, resolution, offset, fallback: `imprint_stages::drape::DrapeParams`.
     #[serde(default)]
     pub params: DrapeParams,
+    /// Where the views' depth maps are rendered; the pushes run on the CPU.
+    #[serde(default)]
+    pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
     #[serde(default = "yes")]
     pub enabled: bool,
@@ -699,6 +702,7 @@ impl NodeSpec {
                 | NodeSpec::Cloth(_)
                 | NodeSpec::Ground(_)
                 | NodeSpec::Snow(_)
+                | NodeSpec::Drape(_)
         )
     }
 
@@ -712,6 +716,7 @@ impl NodeSpec {
             NodeSpec::Cloth(c) => c.backend,
             NodeSpec::Ground(g) => g.backend,
             NodeSpec::Snow(n) => n.backend,
+            NodeSpec::Drape(d) => d.backend,
             _ => None,
         }
     }

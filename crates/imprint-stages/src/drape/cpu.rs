@@ -98,6 +98,24 @@ impl View {
 /// reports what it did. The body should be closed (see the module doc); the garment is any
 /// set of points (a mesh's positions, a cloth's particles).
 pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Result<DrapeReport> {
+    drape_with(body, garment, params, rasterize_depth_with)
+}
+
+/// [`drape_cpu`] with the depth maps from any rasteriser with the signature of
+/// `imprint_core::raster::rasterize_depth_with` (the GPU one is a closure over its context);
+/// the pushes and the inside test run on the CPU.
+pub fn drape_with(
+    body: &Mesh,
+    garment: &mut [Vec3],
+    params: &DrapeParams,
+    mut rasterize: impl FnMut(
+        &Mesh,
+        &imprint_core::camera::Camera,
+        u32,
+        u32,
+        &RasterOptions,
+    ) -> Result<DepthMap>,
+) -> Result<DrapeReport> {
     params.validate()?;
     let mut report = DrapeReport {
         vertices: garment.len(),
@@ -110,9 +128,9 @@ pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Res
     let res = params.resolution;
     let mut views = Vec::with_capacity(params.views.len());
     for dir in params.directions() {
-        let map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
+        let mut map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
             let cam = snow_camera(&bounds, d, res)?;
-            let m = rasterize_depth_with(body, &cam, res, res, &RasterOptions::default())?;
+            let m = rasterize(body, &cam, res, res, &RasterOptions::default())?;
             let look = Lookup::new(&m);
             Ok((m, look))
         };

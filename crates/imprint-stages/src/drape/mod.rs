@@ -68,6 +68,6 @@ pub mod cpu;
 pub mod inside;
 pub mod params;
 
-pub use cpu::{DrapeReport, Push, body_field, drape_cpu};
+pub use cpu::{DrapeReport, Push, body_field, drape_cpu, drape_with};
 pub use inside::InsideTest;
 pub use params::{DrapeParams, Fallback};
