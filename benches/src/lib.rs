@@ -1,6 +1,7 @@
 //! Shared pieces of the benchmark harness: timing, machine description, baselines, GPU table.
 
 pub mod cloth;
+pub mod drape;
 pub mod ground_snow;
 pub mod render;
 pub mod schedule;

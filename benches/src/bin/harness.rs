@@ -23,7 +23,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 7] = [
+const SECTIONS: [(&str, &str); 8] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -37,6 +37,7 @@ const SECTIONS: [(&str, &str); 7] = [
     ("cloth", "the cloth against Taichi, and H's bunny scene"),
     ("schedule", "schedules: H Table 1 columns (c) and (d)"),
     ("ground", "the ground and snow stages"),
+    ("drape", "depth-buffer draping"),
 ];
 
 fn main() {
@@ -87,6 +88,7 @@ fn main() {
             "cloth" => imprint_benches::cloth::section(&root, repeat),
             "schedule" => imprint_benches::schedule::section(&root, repeat),
             "ground" => imprint_benches::ground_snow::section(&root, repeat),
+            "drape" => imprint_benches::drape::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(
