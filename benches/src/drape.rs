@@ -22,7 +22,14 @@ pub fn section(_root: &Path, repeat: usize) -> String {
     let runs = repeat.clamp(1, 5);
     let body = torus(0.5, 0.2, 250, 100);
     let garment = torus(0.5, 0.18, 200, 100);
-    let axes = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
+    let axes = [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ];
     let mut fourteen = axes.to_vec();
     for i in 0..8 {
         let s = |b: u32| if i & b == 0 { 1.0 } else { -1.0 };
@@ -73,7 +80,10 @@ pub fn section(_root: &Path, repeat: usize) -> String {
         p.fallback = Fallback::distance_field();
         let (ms_fb, r_fb) = time(&p);
         let share = |n: usize| 100.0 * n as f64 / r.inside.max(1) as f64;
-        eprintln!("drape: {label}: {ms:.1} ms, unresolved {}", r.unresolved_by_views);
+        eprintln!(
+            "drape: {label}: {ms:.1} ms, unresolved {}",
+            r.unresolved_by_views
+        );
         let _ = writeln!(
             s,
             "| {label} | {ms:.1} | {} ({:.2}%) | {ms_fb:.1} | {} |",

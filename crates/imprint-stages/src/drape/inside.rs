@@ -10,13 +10,182 @@
 //! Meaningful for closed (watertight) bodies, as is "inside". Pieces that touch along shared
 //! faces (boxes stacked into a U) are fine: each shared face is crossed twice, which keeps the
 //! parity. Pieces that overlap are not (a point inside two of them counts as outside).
+//!
+//! A coarse voxel grid over the body answers most points without a ray (same answers): a
+//! cell no triangle's bounding box comes near (a margin around the cell) lies in one
+//! surface-free region with its face-adjacent far cells, and for a mesh whose edges each
+//! border an even number of triangles (a closed surface, or several) the ray parity is the
+//! same at every point of such a region. Each region is decided by the exact test at a few of
+//! its cell centres (and left to the exact test when they disagree); points in near cells,
+//! beyond the grid, or of a mesh that is not closed take the exact test.
 
-use glam::{DVec2, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 use imprint_core::{Aabb, Mesh};
 
 /// The inside test of one closed mesh.
 pub struct InsideTest {
     axes: [AxisGrid; 3],
+    cells: Option<CellGrid>,
+}
+
+/// Voxel states: near the surface (ask the rays), inside, outside.
+const NEAR: u8 = 0;
+const INSIDE: u8 = 1;
+const OUTSIDE: u8 = 2;
+
+/// The voxel grid of far cells with their answers.
+struct CellGrid {
+    min: DVec3,
+    inv: f64,
+    n: [usize; 3],
+    state: Vec<u8>,
+}
+
+impl CellGrid {
+    fn index(&self, p: Vec3) -> Option<usize> {
+        let f = (p.as_dvec3() - self.min) * self.inv;
+        let n = self.n.map(|k| k as f64);
+        if !(f.x >= 0.0 && f.y >= 0.0 && f.z >= 0.0 && f.x < n[0] && f.y < n[1] && f.z < n[2]) {
+            return None;
+        }
+        let (i, j, k) = (f.x as usize, f.y as usize, f.z as usize);
+        Some((k * self.n[1] + j) * self.n[0] + i)
+    }
+
+    /// The grid of `tris` (all finite) within `bounds` with its far cells (not yet decided) and
+    /// their regions: face-adjacent far cells, in scan order.
+    fn far_regions(tris: &[[Vec3; 3]], bounds: &Aabb) -> Option<(Self, Vec<Vec<u32>>)> {
+        let ext = (bounds.max - bounds.min).as_dvec3();
+        let longest = ext.max_element();
+        if !(longest > 0.0 && longest.is_finite()) {
+            return None;
+        }
+        let res = ((tris.len() as f64).cbrt() * 3.0).clamp(16.0, 128.0);
+        let cell = longest / res;
+        // One padding cell on each side, so that points just outside the body hit far cells.
+        let min = bounds.min.as_dvec3() - DVec3::splat(cell);
+        let n = [0, 1, 2].map(|a| ((ext[a] / cell).ceil() as usize).max(1) + 2);
+        let inv = 1.0 / cell;
+        let margin = 0.05 * cell;
+        let total = n[0] * n[1] * n[2];
+        let mut state = vec![OUTSIDE; total];
+        let clampi = |x: f64, a: usize| (x.floor().max(0.0) as usize).min(n[a] - 1);
+        for t in tris {
+            let lo = t[0].min(t[1]).min(t[2]).as_dvec3() - DVec3::splat(margin);
+            let hi = t[0].max(t[1]).max(t[2]).as_dvec3() + DVec3::splat(margin);
+            let l = [0, 1, 2].map(|a| clampi((lo[a] - min[a]) * inv, a));
+            let h = [0, 1, 2].map(|a| clampi((hi[a] - min[a]) * inv, a));
+            for k in l[2]..=h[2] {
+                for j in l[1]..=h[1] {
+                    for i in l[0]..=h[0] {
+                        state[(k * n[1] + j) * n[0] + i] = NEAR;
+                    }
+                }
+            }
+        }
+        // Regions of face-adjacent far cells, in scan order.
+        let mut label = vec![u32::MAX; total];
+        let mut regions: Vec<Vec<u32>> = Vec::new();
+        let mut stack = Vec::new();
+        for start in 0..total {
+            if state[start] == NEAR || label[start] != u32::MAX {
+                continue;
+            }
+            let r = regions.len() as u32;
+            let mut cells = Vec::new();
+            label[start] = r;
+            stack.push(start);
+            while let Some(c) = stack.pop() {
+                cells.push(c as u32);
+                let i = c % n[0];
+                let j = (c / n[0]) % n[1];
+                let k = c / (n[0] * n[1]);
+                let mut visit = |d: usize| {
+                    if state[d] != NEAR && label[d] == u32::MAX {
+                        label[d] = r;
+                        stack.push(d);
+                    }
+                };
+                if i > 0 {
+                    visit(c - 1);
+                }
+                if i + 1 < n[0] {
+                    visit(c + 1);
+                }
+                if j > 0 {
+                    visit(c - n[0]);
+                }
+                if j + 1 < n[1] {
+                    visit(c + n[0]);
+                }
+                if k > 0 {
+                    visit(c - n[0] * n[1]);
+                }
+                if k + 1 < n[2] {
+                    visit(c + n[0] * n[1]);
+                }
+            }
+            regions.push(cells);
+        }
+        Some((CellGrid { min, inv, n, state }, regions))
+    }
+
+    /// Decides each far region by `exact` at up to three of its cell centres (first, middle,
+    /// last found), which must agree; a region where they do not is left to the exact test.
+    fn decide(&mut self, regions: &[Vec<u32>], exact: impl Fn(Vec3) -> bool) {
+        let n = self.n;
+        let centre = |c: usize| {
+            let ijk = DVec3::new(
+                (c % n[0]) as f64,
+                ((c / n[0]) % n[1]) as f64,
+                (c / (n[0] * n[1])) as f64,
+            );
+            (self.min + (ijk + 0.5) / self.inv).as_vec3()
+        };
+        for cells in regions {
+            let picks = [0, cells.len() / 2, cells.len() - 1];
+            let answers = picks.map(|k| exact(centre(cells[k] as usize)));
+            let s = if answers.iter().all(|&a| a == answers[0]) {
+                if answers[0] { INSIDE } else { OUTSIDE }
+            } else {
+                NEAR
+            };
+            for &c in cells {
+                self.state[c as usize] = s;
+            }
+        }
+    }
+}
+
+/// Whether every edge borders an even number of triangles (by vertex index, or else by
+/// position): the triangles then bound closed pieces and the ray parity changes only across
+/// the surface.
+fn even_edges(mesh: &Mesh) -> bool {
+    use rayon::slice::ParallelSliceMut;
+    fn even<K: Ord + Copy + Send>(mut edges: Vec<(K, K)>) -> bool {
+        for e in &mut edges {
+            if e.1 < e.0 {
+                *e = (e.1, e.0);
+            }
+        }
+        edges.par_sort_unstable();
+        edges.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
+    }
+    let by_index = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .collect();
+    even(by_index) || {
+        let key = |v: Vec3| v.to_array().map(f32::to_bits);
+        let by_position = (0..mesh.triangles.len())
+            .flat_map(|t| {
+                let [a, b, c] = mesh.triangle(t).map(key);
+                [(a, b), (b, c), (c, a)]
+            })
+            .collect();
+        even(by_position)
+    }
 }
 
 impl InsideTest {
@@ -25,15 +194,55 @@ impl InsideTest {
             .map(|t| mesh.triangle(t))
             .collect();
         let bounds = mesh.bounds();
-        InsideTest {
-            axes: [0, 1, 2].map(|a| AxisGrid::new(&tris, &bounds, a)),
+        // The three axes' bins and the grid's far regions are independent: built side by side.
+        let (axes, far) = rayon::join(
+            || {
+                let (x, (y, z)) = rayon::join(
+                    || AxisGrid::new(&tris, &bounds, 0),
+                    || {
+                        rayon::join(
+                            || AxisGrid::new(&tris, &bounds, 1),
+                            || AxisGrid::new(&tris, &bounds, 2),
+                        )
+                    },
+                );
+                [x, y, z]
+            },
+            || {
+                let finite = tris.iter().flatten().all(|v| v.is_finite());
+                if finite && !tris.is_empty() && !bounds.is_empty() && even_edges(mesh) {
+                    CellGrid::far_regions(&tris, &bounds)
+                } else {
+                    None
+                }
+            },
+        );
+        let mut test = InsideTest { axes, cells: None };
+        if let Some((mut grid, regions)) = far {
+            grid.decide(&regions, |p| test.exact(p));
+            test.cells = Some(grid);
         }
+        test
     }
 
     /// Whether `p` is inside the body (two of the three rays cross its surface an odd number
     /// of times).
     /// A point exactly on the surface (a ray meets a triangle at the point itself) is outside.
     pub fn inside(&self, p: Vec3) -> bool {
+        if let Some(g) = &self.cells
+            && let Some(c) = g.index(p)
+        {
+            match g.state[c] {
+                INSIDE => return true,
+                OUTSIDE => return false,
+                _ => {}
+            }
+        }
+        self.exact(p)
+    }
+
+    /// [`InsideTest::inside`] by the three rays, without the voxel grid.
+    pub fn exact(&self, p: Vec3) -> bool {
         let mut votes = 0;
         for g in &self.axes {
             match g.odd_crossings(p) {
@@ -199,7 +408,95 @@ fn crossing(t: &Tri2, q: DVec2) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use imprint_core::mesh::primitives::{cuboid, uv_sphere};
+    use imprint_core::mesh::primitives::{cuboid, torus, uv_sphere};
+
+    /// A deterministic generator of uniform numbers in [0, 1).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn vec(&mut self) -> Vec3 {
+            Vec3::new(self.next(), self.next(), self.next())
+        }
+    }
+
+    fn boxed(min: Vec3, max: Vec3) -> Mesh {
+        let mut m = cuboid(0.5 * (max - min), 2);
+        let c = 0.5 * (min + max);
+        for p in &mut m.positions {
+            *p += c;
+        }
+        m
+    }
+
+    /// Checks the grid's answers against the rays on random points in and around the bounds,
+    /// on the triangles, near them (several scales) and at the vertices; returns the share of
+    /// the points the grid answered.
+    fn same_as_exact(mesh: &Mesh, seed: u64) -> f64 {
+        let t = InsideTest::new(mesh);
+        let grid = t.cells.as_ref().expect("closed mesh: grid built");
+        let b = mesh.bounds();
+        let (lo, size) = (b.min - 0.2 * (b.max - b.min), 1.4 * (b.max - b.min));
+        let mut rng = Rng(seed);
+        let mut points: Vec<Vec3> = mesh.positions.clone();
+        for _ in 0..100_000 {
+            points.push(lo + rng.vec() * size);
+        }
+        for _ in 0..100_000 {
+            let tri = mesh.triangle((rng.next() * mesh.triangles.len() as f32) as usize);
+            let (u, v) = (rng.next(), rng.next());
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let on = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+            points.push(on);
+            let scale = [1e-1, 1e-2, 1e-3, 1e-5, 1e-7][(rng.next() * 5.0) as usize];
+            points.push(on + (rng.vec() - 0.5) * scale);
+        }
+        // Points on a lattice (grazing rays through edges and face planes of boxes).
+        for i in 0..=24 {
+            for j in 0..=24 {
+                for k in 0..=24 {
+                    points.push(lo + Vec3::new(i as f32, j as f32, k as f32) / 24.0 * size);
+                }
+            }
+        }
+        let mut fast = 0usize;
+        for &p in &points {
+            assert_eq!(t.inside(p), t.exact(p), "{p:?}");
+            if grid.index(p).is_some_and(|c| grid.state[c] != NEAR) {
+                fast += 1;
+            }
+        }
+        fast as f64 / points.len() as f64
+    }
+
+    #[test]
+    fn grid_answers_equal_exact() {
+        let tor = same_as_exact(&torus(0.5, 0.2, 250, 100), 1);
+        let cube = same_as_exact(&cuboid(Vec3::new(0.5, 0.3, 0.2), 4), 2);
+        let mut u = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
+        u.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
+        u.append(&boxed(Vec3::new(-0.5, 0.3, 0.7), Vec3::new(0.5, 1.0, 0.8)));
+        let ub = same_as_exact(&u, 3);
+        // The grid does answer a good share (not only the rays).
+        for share in [tor, cube, ub] {
+            assert!(share > 0.05, "{tor} {cube} {ub}");
+        }
+    }
+
+    #[test]
+    fn open_mesh_has_no_grid() {
+        let mut m = cuboid(Vec3::splat(0.5), 2);
+        m.triangles.pop();
+        assert!(InsideTest::new(&m).cells.is_none());
+    }
 
     #[test]
     fn sphere_and_touching_boxes() {
