@@ -160,3 +160,32 @@ pub mod ground {
         total / contact_frames.max(1) as f64
     }
 }
+
+/// Drape test bodies shared by the tests and the benchmarks.
+pub mod drape {
+    use glam::Vec3;
+    use imprint_core::Mesh;
+    use imprint_core::mesh::primitives::cuboid;
+
+    /// A closed box from `min` to `max`.
+    pub fn boxed(min: Vec3, max: Vec3) -> Mesh {
+        let mut m = cuboid(0.5 * (max - min), 2);
+        let c = 0.5 * (min + max);
+        for p in &mut m.positions {
+            *p += c;
+        }
+        m
+    }
+
+    /// A U in the y-z plane (extruded along x, the axis no default view looks along): a bar
+    /// along z at the bottom, a thick arm and a thin arm, a narrow gap between them. A vertex
+    /// in the thick arm next to the gap is nearest (of the views' surfaces) to the thin arm's
+    /// outer face: the shortest view push jumps through the gap and the thin arm. No view
+    /// resolves it; the distance field pushes it out through the inner face into the gap.
+    pub fn u_body() -> Mesh {
+        let mut body = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
+        body.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
+        body.append(&boxed(Vec3::new(-0.5, 0.3, 0.7), Vec3::new(0.5, 1.0, 0.8)));
+        body
+    }
+}

@@ -3,9 +3,9 @@
 //! distance-field fallback), and a closed box against its analytic signed distance.
 
 use glam::{Quat, Vec3};
-use imprint_core::Mesh;
 use imprint_core::mesh::primitives::{cuboid, uv_sphere};
 use imprint_stages::drape::{DrapeParams, Fallback, InsideTest, drape_cpu};
+use imprint_tests::drape::u_body;
 
 fn params(resolution: u32, offset: f32) -> DrapeParams {
     DrapeParams {
@@ -75,27 +75,6 @@ fn outside_vertices_do_not_move() {
     assert_eq!((rep.inside, rep.moved, rep.unresolved), (1, 1, 0));
     assert_eq!(mixed[1], Vec3::new(0.0, 1.5, 0.0));
     assert!(mixed[0].length() >= 1.0, "{}", mixed[0]);
-}
-
-fn boxed(min: Vec3, max: Vec3) -> Mesh {
-    let mut m = cuboid(0.5 * (max - min), 2);
-    let c = 0.5 * (min + max);
-    for p in &mut m.positions {
-        *p += c;
-    }
-    m
-}
-
-/// A U in the y-z plane (extruded along x, the axis no default view looks along): a bar
-/// along z at the bottom, a thick arm and a thin arm, a narrow gap between them. A vertex in
-/// the thick arm next to the gap is nearest (of the views' surfaces) to the thin arm's outer
-/// face: the shortest view push jumps through the gap and the thin arm. No view resolves it;
-/// the distance field pushes it out through the inner face into the gap.
-fn u_body() -> Mesh {
-    let mut body = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
-    body.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
-    body.append(&boxed(Vec3::new(-0.5, 0.3, 0.7), Vec3::new(0.5, 1.0, 0.8)));
-    body
 }
 
 /// The U's test vertices sit in the thick arm (z < 0.6) next to the gap, where the surface
