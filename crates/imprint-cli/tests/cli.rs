@@ -76,6 +76,32 @@ fn case(nodes: &str) -> Case {
     Case { dir, file }
 }
 
+/// Runs the case into `cpu/` on the CPU and into `gpu/` on the GPU; false (skip) without an
+/// adapter, as [`run_gpu_or_skip`].
+fn run_cpu_and_gpu(c: &Case) -> bool {
+    let f = c.file.to_str().unwrap();
+    run_ok(
+        &["run", f, "--out", "cpu", "--backend", "cpu"],
+        c.dir.path(),
+    );
+    run_gpu_or_skip(f, "gpu", c.dir.path())
+}
+
+/// A JSON file the run wrote (`report.json`, a field's sidecar).
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+/// [`case`] with `timing` (e.g. `frames: 12, fps: 24`) instead of the default 2 frames.
+fn case_timed(nodes: &str, timing: &str) -> Case {
+    let c = case(nodes);
+    let text = std::fs::read_to_string(&c.file)
+        .unwrap()
+        .replace("frames: 2", timing);
+    std::fs::write(&c.file, text).unwrap();
+    c
+}
+
 fn teapot() -> String {
     assets().join("teapot.obj").display().to_string()
 }
@@ -295,8 +321,7 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
             assert!(a == b, "{name} differs between runs");
         }
     }
-    let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("o1/report.json")).unwrap()).unwrap();
+    let json: serde_json::Value = read_json(&d.join("o1/report.json"));
     assert_eq!(json["frames"], serde_json::json!([0, 1]));
     let field = &json["nodes"]["field"];
     assert_eq!(field["runs"], 2);
@@ -308,9 +333,7 @@ fn run_writes_frames_and_a_report_and_is_deterministic() {
         "{err}"
     );
     assert!(err["far_fraction"].as_f64().unwrap() < 0.05, "{err}");
-    let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("o1/out/field_0000_field.json")).unwrap())
-            .unwrap();
+    let meta: serde_json::Value = read_json(&d.join("o1/out/field_0000_field.json"));
     assert_eq!(meta["dims"][0], 20);
 }
 
@@ -333,9 +356,7 @@ fn field_command_computes_one_mesh() {
         ],
         dir.path(),
     );
-    let meta: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("f/field_0000_field.json")).unwrap())
-            .unwrap();
+    let meta: serde_json::Value = read_json(&dir.path().join("f/field_0000_field.json"));
     assert_eq!(
         meta["dims"]
             .as_array()
@@ -359,17 +380,10 @@ fn gpu_backend_agrees_with_cpu_through_the_whole_pipeline() {
         good_nodes(&teapot())
     );
     let c = case(&nodes);
-    let f = c.file.to_str().unwrap();
-    run_ok(
-        &["run", f, "--out", "cpu", "--backend", "cpu"],
-        c.dir.path(),
-    );
-    if !run_gpu_or_skip(f, "gpu", c.dir.path()) {
+    if !run_cpu_and_gpu(&c) {
         return;
     }
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
-            .unwrap();
+    let report: serde_json::Value = read_json(&c.dir.path().join("gpu/report.json"));
     assert_eq!(report["nodes"]["field"]["backend"], "gpu");
     assert_eq!(report["nodes"]["vox"]["backend"], "gpu");
     assert_eq!(report["nodes"]["top"]["backend"], "gpu");
@@ -581,8 +595,7 @@ fn cloth_node_runs_and_reports_per_frame_metrics() {
     let d = c.dir.path().join("o");
     let m = imprint_core::Mesh::load_obj(&d.join("obj/cloth_0001.obj")).unwrap();
     assert_eq!(m.positions.len(), 144);
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&d.join("report.json"));
     let frames = report["nodes"]["cloth"]["metrics"]["per_frame"]
         .as_array()
         .unwrap();
@@ -662,22 +675,13 @@ fn gpu_cloth_agrees_with_cpu_through_the_pipeline() {
             substeps: 16)),
         "obj": WriteMesh(mesh: "cloth"),"#;
     let c = case(nodes);
-    let f = c.file.to_str().unwrap();
-    run_ok(
-        &["run", f, "--out", "cpu", "--backend", "cpu"],
-        c.dir.path(),
-    );
-    if !run_gpu_or_skip(f, "gpu", c.dir.path()) {
+    if !run_cpu_and_gpu(&c) {
         return;
     }
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
-            .unwrap();
+    let report: serde_json::Value = read_json(&c.dir.path().join("gpu/report.json"));
     assert_eq!(report["nodes"]["cloth"]["backend"], "gpu");
     // The GPU path reports the CPU's per-frame metrics, with the same keys and close values.
-    let cpu_report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(c.dir.path().join("cpu/report.json")).unwrap())
-            .unwrap();
+    let cpu_report: serde_json::Value = read_json(&c.dir.path().join("cpu/report.json"));
     let per_frame = |r: &serde_json::Value| r["nodes"]["cloth"]["metrics"]["per_frame"].clone();
     let (g, cpu) = (per_frame(&report), per_frame(&cpu_report));
     for (g, cpu) in g.as_array().unwrap().iter().zip(cpu.as_array().unwrap()) {
@@ -716,11 +720,7 @@ fn check_prints_the_schedule_and_refuses_bad_ones() {
         "off": DistanceField(boundary: "vox", measure: Never, enabled: false),
         "w": WriteField(field: "field", npy: false, every: 2, offset: 1),
         "w_off": WriteField(field: "off", npy: false),"#;
-    let c = case(nodes);
-    let text12 = std::fs::read_to_string(&c.file)
-        .unwrap()
-        .replace("frames: 2", "frames: 12");
-    std::fs::write(&c.file, text12).unwrap();
+    let c = case_timed(nodes, "frames: 12");
     let out = run_ok(&["check", c.file.to_str().unwrap()], c.dir.path());
     let text = String::from_utf8_lossy(&out.stdout);
     let row = |n: &str| {
@@ -759,19 +759,14 @@ fn ground_node_keeps_its_prints_and_its_mass() {
         "sand": Ground(objects: ["ball"],
                        params: (size: (0.64, 0.32), resolution: (64, 32), initial: Flat(0.1))),
         "h": WriteHeightmap(heights: "sand", formats: [Png16, Exr, Npy], every: 100),"#;
-    let c = case(nodes);
-    let text = std::fs::read_to_string(&c.file)
-        .unwrap()
-        .replace("frames: 2", "frames: 24, fps: 24");
-    std::fs::write(&c.file, text).unwrap();
+    let c = case_timed(nodes, "frames: 24, fps: 24");
     run_ok(
         &["run", c.file.to_str().unwrap(), "--out", "o"],
         c.dir.path(),
     );
     let d = c.dir.path().join("o");
     assert!(d.join("h/sand_0000.exr").is_file() && d.join("h/sand_0000.npy").is_file());
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&d.join("report.json"));
     let frames = report["nodes"]["sand"]["metrics"]["per_frame"]
         .as_array()
         .unwrap();
@@ -799,18 +794,13 @@ fn snow_piles_up_on_meshes_and_on_a_ground_that_takes_it_in() {
                                   material: Preset(Snow))),
         "m": WriteMesh(mesh: "snowy_box", every: 100),
         "h": WriteHeightmap(heights: "ground", formats: [Npy], every: 100),"#;
-    let c = case(nodes);
-    let text = std::fs::read_to_string(&c.file)
-        .unwrap()
-        .replace("frames: 2", "frames: 6, fps: 10");
-    std::fs::write(&c.file, text).unwrap();
+    let c = case_timed(nodes, "frames: 6, fps: 10");
     run_ok(
         &["run", c.file.to_str().unwrap(), "--out", "o"],
         c.dir.path(),
     );
     let d = c.dir.path().join("o");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&d.join("report.json"));
     let mass: Vec<i64> = report["nodes"]["ground"]["metrics"]["per_frame"]
         .as_array()
         .unwrap()
@@ -877,17 +867,8 @@ fn gpu_ground_and_snow_agree_with_the_cpu() {
         "h": WriteHeightmap(heights: "sand", formats: [Npy], every: 11),
         "s": WriteHeightmap(heights: "fall", formats: [Npy], every: 11),
         "b": WriteHeightmap(heights: "bare", formats: [Npy], every: 11),"#;
-    let c = case(nodes);
-    let text = std::fs::read_to_string(&c.file)
-        .unwrap()
-        .replace("frames: 2", "frames: 12, fps: 24");
-    std::fs::write(&c.file, text).unwrap();
-    let f = c.file.to_str().unwrap();
-    run_ok(
-        &["run", f, "--out", "cpu", "--backend", "cpu"],
-        c.dir.path(),
-    );
-    if !run_gpu_or_skip(f, "gpu", c.dir.path()) {
+    let c = case_timed(nodes, "frames: 12, fps: 24");
+    if !run_cpu_and_gpu(&c) {
         return;
     }
     // `bare` runs its passes on the GPU too (`GpuGround`); `sand` takes snow in, which has
@@ -913,9 +894,7 @@ fn gpu_ground_and_snow_agree_with_the_cpu() {
         eprintln!("{stem}: CPU vs GPU worst {worst:.2e} m");
         assert!(worst <= tol, "{stem}: CPU and GPU differ by {worst} m");
     }
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(c.dir.path().join("gpu/report.json")).unwrap())
-            .unwrap();
+    let report: serde_json::Value = read_json(&c.dir.path().join("gpu/report.json"));
     assert_eq!(report["nodes"]["sand"]["backend"], "gpu");
     assert_eq!(report["nodes"]["fall"]["backend"], "gpu");
     assert_eq!(report["nodes"]["bare"]["backend"], "gpu");
@@ -936,8 +915,7 @@ fn drape_node_pushes_a_garment_out_of_the_body() {
     );
     let d = c.dir.path().join("o");
     let m = imprint_core::Mesh::load_obj(&d.join("obj/fit_0000.obj")).unwrap();
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&d.join("report.json"));
     let f = &report["nodes"]["fit"]["metrics"]["per_frame"][0];
     let texel = f["texel"].as_f64().unwrap() as f32;
     assert_eq!(f["inside"], f["vertices"], "{f}");

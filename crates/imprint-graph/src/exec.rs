@@ -551,13 +551,7 @@ pub fn run_observed(
                         }
                         *last = Some(now.clone());
                     }
-                    let meshes: Vec<Arc<Mesh>> = objects
-                        .iter()
-                        .map(|o| match values.get(o.as_str()) {
-                            Some(Value::Mesh(m)) => m.clone(),
-                            _ => unreachable!("edges are typed"),
-                        })
-                        .collect();
+                    let meshes = meshes_of(objects, &values);
                     let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
                     let stepped = match (raster, gpu_ground.as_mut()) {
                         (Some(r), Some(g)) => {
@@ -600,13 +594,7 @@ pub fn run_observed(
                     gpu: raster,
                     gpu_relax,
                 } => {
-                    let ms: Vec<Arc<Mesh>> = meshes
-                        .iter()
-                        .map(|m| match values.get(m.as_str()) {
-                            Some(Value::Mesh(m)) => m.clone(),
-                            _ => unreachable!("edges are typed"),
-                        })
-                        .collect();
+                    let ms = meshes_of(meshes, &values);
                     let refs: Vec<&Mesh> = ms.iter().map(|m| &**m).collect();
                     let dt = 1.0 / plan.file.fps;
                     let step = match raster {
@@ -754,7 +742,7 @@ pub fn run_observed(
                             sched
                                 .finished
                                 .iter()
-                                .map(|(f, m)| (f.clone(), Arc::new(m.clone())))
+                                .map(|(f, m)| (f.clone(), m.clone()))
                                 .collect()
                         } else if new_build && sched.schedule.split == 1 {
                             let Some(Value::Mesh(mesh)) = values.get(mesh_node.as_str()) else {
@@ -1112,6 +1100,17 @@ fn cpu_field(
     };
     cache.insert(name.to_string(), f.clone());
     Ok(f)
+}
+
+/// The current values of Mesh nodes `names`, in order.
+fn meshes_of(names: &[String], values: &BTreeMap<String, Value>) -> Vec<Arc<Mesh>> {
+    names
+        .iter()
+        .map(|n| match values.get(n.as_str()) {
+            Some(Value::Mesh(m)) => m.clone(),
+            _ => unreachable!("edges are typed"),
+        })
+        .collect()
 }
 
 /// A node published a new value: its consumers see its version move.

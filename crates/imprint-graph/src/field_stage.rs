@@ -48,10 +48,10 @@ pub struct Ahead {
 }
 
 impl Ahead {
-    fn boundary_at(&mut self, key: i64) -> imprint_core::Result<(Mesh, Boundary)> {
+    fn boundary_at(&mut self, key: i64) -> imprint_core::Result<(Arc<Mesh>, Boundary)> {
         let mesh = self.mesh.at(key as f32 / self.fps);
         let b = self.voxelizer.run(&mesh, self.variant)?;
-        Ok((mesh, b))
+        Ok((Arc::new(mesh), b))
     }
 
     pub fn spec(&self) -> &GridSpec {
@@ -65,7 +65,7 @@ struct Job {
     next: u32,
     build: FieldBuild,
     /// The mesh it was voxelised from (interpolate), for error measurement.
-    mesh: Option<Mesh>,
+    mesh: Option<Arc<Mesh>>,
 }
 
 /// A field node's state between frames (CPU builds; the GPU builds whole, on keyframes).
@@ -78,7 +78,7 @@ pub struct FieldSchedule {
     /// Interpolate: builds by keyframe (the segment's two, and the next once finished).
     keys: BTreeMap<i64, Arc<DistanceField>>,
     /// Interpolate: the builds finished on this frame, with their meshes (for measurement).
-    pub finished: Vec<(Arc<DistanceField>, Mesh)>,
+    pub finished: Vec<(Arc<DistanceField>, Arc<Mesh>)>,
 }
 
 /// What a field node did on a frame.
