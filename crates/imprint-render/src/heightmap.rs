@@ -148,15 +148,20 @@ pub fn read_heightmap_png16(path: &Path) -> Result<HeightField> {
     )
 }
 
+/// One custom attribute, v3f (origin x, origin z, cell): the exr crate keeps custom
+/// attributes in a hash map and writes them in its order, which changes from run to run, so
+/// more than one would make the same heights give different bytes.
+const EXR_GRID: &str = "imprintGrid";
+/// Earlier files' attributes, still read.
 const EXR_ORIGIN: &str = "imprintOrigin";
 const EXR_CELL: &str = "imprintCell";
-const EXR_ORIENTATION: &str = "imprintOrientation";
 /// The channel name of a heightmap EXR: "Y", so viewers show it as a grayscale image.
 pub const EXR_CHANNEL: &str = "Y";
 
 /// Writes a single-channel f32 OpenEXR (channel [`EXR_CHANNEL`] = "Y", ZIP-compressed, so the
 /// heights are stored bit-exactly), north up. The origin and cell size go into the header as
-/// the custom attributes `imprintOrigin` (v2f) and `imprintCell` (float).
+/// the custom attribute `imprintGrid` (v3f: origin x, origin z, cell), the orientation into
+/// its standard `comments`. The same heights give the same bytes.
 pub fn write_heightmap_exr(path: &Path, hf: &HeightField) -> Result<()> {
     use exr::prelude::*;
     hf.validate()?;
@@ -168,16 +173,10 @@ pub fn write_heightmap_exr(path: &Path, hf: &HeightField) -> Result<()> {
     }
     let mut attrs = LayerAttributes::named("height");
     attrs.other.insert(
-        Text::from(EXR_ORIGIN),
-        AttributeValue::FloatVec2(exr::math::Vec2(hf.origin.x, hf.origin.y)),
+        Text::from(EXR_GRID),
+        AttributeValue::FloatVec3((hf.origin.x, hf.origin.y, hf.cell)),
     );
-    attrs
-        .other
-        .insert(Text::from(EXR_CELL), AttributeValue::F32(hf.cell));
-    attrs.other.insert(
-        Text::from(EXR_ORIENTATION),
-        AttributeValue::Text(Text::from(ORIENTATION)),
-    );
+    attrs.comments = Some(Text::from(ORIENTATION));
     let channel = AnyChannel::new(EXR_CHANNEL, FlatSamples::F32(samples));
     let layer = Layer::new(
         (nx, nz),
@@ -196,8 +195,9 @@ pub fn write_heightmap_exr(path: &Path, hf: &HeightField) -> Result<()> {
 }
 
 /// Reads a heightmap EXR: the channel "Y" (or "H", or the only channel), f32 or f16, north up.
-/// The origin and cell come from the `imprintOrigin` / `imprintCell` attributes; files without
-/// them (written by other tools) read with origin (0, 0) and cell 1.
+/// The origin and cell come from the `imprintGrid` attribute (or the `imprintOrigin` /
+/// `imprintCell` of earlier files); files without them (written by other tools) read with
+/// origin (0, 0) and cell 1.
 pub fn read_heightmap_exr(path: &Path) -> Result<HeightField> {
     use exr::prelude::*;
     let image = read()
@@ -219,13 +219,19 @@ pub fn read_heightmap_exr(path: &Path) -> Result<HeightField> {
         .ok_or_else(|| io_err(path, "no channel named Y or H"))?;
     let (nx, nz) = (layer.size.0, layer.size.1);
     let values: Vec<f32> = channel.sample_data.values_as_f32().collect();
-    let origin = match layer.attributes.other.get(&Text::from(EXR_ORIGIN)) {
-        Some(AttributeValue::FloatVec2(v)) => imprint_core::glam::Vec2::new(v.0, v.1),
-        _ => imprint_core::glam::Vec2::ZERO,
-    };
-    let cell = match layer.attributes.other.get(&Text::from(EXR_CELL)) {
-        Some(AttributeValue::F32(c)) => *c,
-        _ => 1.0,
+    let other = &layer.attributes.other;
+    let (origin, cell) = match other.get(&Text::from(EXR_GRID)) {
+        Some(AttributeValue::FloatVec3((x, z, c))) => (imprint_core::glam::Vec2::new(*x, *z), *c),
+        _ => (
+            match other.get(&Text::from(EXR_ORIGIN)) {
+                Some(AttributeValue::FloatVec2(v)) => imprint_core::glam::Vec2::new(v.0, v.1),
+                _ => imprint_core::glam::Vec2::ZERO,
+            },
+            match other.get(&Text::from(EXR_CELL)) {
+                Some(AttributeValue::F32(c)) => *c,
+                _ => 1.0,
+            },
+        ),
     };
     let dims = UVec2::new(
         u32::try_from(nx).map_err(|e| io_err(path, e))?,
@@ -493,6 +499,15 @@ mod tests {
         assert_eq!(list[0].name, exr::prelude::Text::from("Y"));
         let first = list[0].sample_data.value_by_flat_index(0).to_f32();
         assert_eq!(first, hf.get(0, 3));
+
+        // The same heights give the same bytes, however the header's maps are ordered (with
+        // several custom attributes they came out in a different order from run to run).
+        let bytes = std::fs::read(&path).unwrap();
+        for k in 0..8 {
+            let again = dir.path().join(format!("again{k}.exr"));
+            write_heightmap_exr(&again, &hf).unwrap();
+            assert_eq!(std::fs::read(&again).unwrap(), bytes, "write {k}");
+        }
     }
 
     #[test]
