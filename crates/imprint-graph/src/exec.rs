@@ -622,26 +622,19 @@ pub fn run_observed(
                         None => sim.step(&refs, ground.as_ref(), dt),
                     }
                     .map_err(|e| Error::Invalid(format!("node '{name}', frame {frame}: {e}")))?;
-                    let cover = sim.cover(&refs)?;
                     let mut m = serde_json::Map::new();
                     m.insert("frame".into(), frame.into());
                     m.insert("reached".into(), step.reached.into());
                     if let Some(g) = sim.ground() {
                         m.insert("ground_snow_volume".into(), g.volume().into());
                     }
-                    let deepest = cover.meshes[0].depth.iter().copied().fold(0.0f32, f32::max);
+                    let deepest = sim.mesh_depth(0).iter().copied().fold(0.0f32, f32::max);
                     m.insert("mesh_max_depth".into(), deepest.into());
                     push_per_frame(nr, serde_json::Value::Object(m));
-                    let v = match cover.ground {
-                        Some(g) => Value::Heights(Arc::new(g.surface)),
-                        None => Value::Mesh(Arc::new(
-                            cover
-                                .meshes
-                                .into_iter()
-                                .next()
-                                .expect("one mesh at least")
-                                .mesh,
-                        )),
+                    // Only what the node outputs: the ground's surface, or the first mesh.
+                    let v = match sim.ground() {
+                        Some(g) => Value::Heights(Arc::new(g.surface())),
+                        None => Value::Mesh(Arc::new(sim.displaced(0, refs[0]))),
                     };
                     values.insert(name.clone(), v);
                     bump(&mut versions, name);

@@ -416,7 +416,7 @@ impl SnowSim {
     }
 
     /// Mesh `m` with its vertices moved along their normals by `displacement × depth`.
-    fn displaced(&self, m: usize, mesh: &Mesh) -> Mesh {
+    pub fn displaced(&self, m: usize, mesh: &Mesh) -> Mesh {
         let depth = self.mesh_depth(m);
         let normals = vertex_normals(mesh);
         let s = self.params.displacement;
