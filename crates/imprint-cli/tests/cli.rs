@@ -958,3 +958,26 @@ fn drape_node_pushes_a_garment_out_of_the_body() {
         );
     }
 }
+
+/// A stage that fails while running (snow piling past what a ground cell holds) stops the run
+/// with exit code 1, naming the node and frame and what to change; nothing is written.
+#[test]
+fn a_failing_stage_names_node_and_frame_and_exits_1() {
+    let nodes = r#"        "box": Mesh(primitive: Box(size: (0.2, 0.2, 0.2))),
+        "s": Snow(meshes: ["box"], ground: (size: (0.64, 0.64), resolution: (16, 16)),
+                  params: (directions: 1, resolution: 32, rate: 100000.0)),
+        "h": WriteHeightmap(heights: "s", formats: [Npy]),"#;
+    let c = case(nodes);
+    let out = imprint(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("node 's', frame 0") && err.contains("lower rate"),
+        "{err}"
+    );
+    assert!(!c.dir.path().join("o/h/s_0000.npy").exists());
+    assert!(!c.dir.path().join("o/report.json").exists());
+}

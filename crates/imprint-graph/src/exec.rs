@@ -545,9 +545,8 @@ pub fn run_observed(
                                 .zip(&before.heights)
                                 .map(|(n, b)| n - b)
                                 .collect();
-                            sim.add_heights(&rise).map_err(|e| {
-                                Error::Invalid(format!("node '{name}', accumulate '{a}': {e}"))
-                            })?;
+                            sim.add_heights(&rise)
+                                .map_err(|e| at_node(e, name, frame))?;
                         }
                         *last = Some(now.clone());
                     }
@@ -565,18 +564,7 @@ pub fn run_observed(
                         }),
                         (None, _) => sim.step(&refs),
                     };
-                    let m = stepped.map_err(|e| match e {
-                        Error::Numerical { message, hint, .. } => Error::Numerical {
-                            node: name.clone(),
-                            frame,
-                            message,
-                            hint,
-                        },
-                        Error::Invalid(m) => {
-                            Error::Invalid(format!("node '{name}', frame {frame}: {m}"))
-                        }
-                        other => other,
-                    })?;
+                    let m = stepped.map_err(|e| at_node(e, name, frame))?;
                     push_per_frame(nr, serde_json::to_value(m).expect("plain data"));
                     let heights = match gpu_ground {
                         Some(g) => g.to_height_field(),
@@ -621,7 +609,7 @@ pub fn run_observed(
                         }
                         None => sim.step(&refs, ground.as_ref(), dt),
                     }
-                    .map_err(|e| Error::Invalid(format!("node '{name}', frame {frame}: {e}")))?;
+                    .map_err(|e| at_node(e, name, frame))?;
                     let mut m = serde_json::Map::new();
                     m.insert("frame".into(), frame.into());
                     m.insert("reached".into(), step.reached.into());
@@ -668,9 +656,7 @@ pub fn run_observed(
                                 imprint_stages::drape::drape_cpu(b, &mut fitted.positions, params)
                             }
                         }
-                        .map_err(|e| {
-                            Error::Invalid(format!("node '{name}', frame {frame}: {e}"))
-                        })?;
+                        .map_err(|e| at_node(e, name, frame))?;
                         fitted.compute_normals();
                         let mut m = serde_json::to_value(&r).expect("plain data");
                         m["frame"] = frame.into();
@@ -1093,6 +1079,22 @@ fn cpu_field(
     };
     cache.insert(name.to_string(), f.clone());
     Ok(f)
+}
+
+/// A stage's error as the run reports it: named after the node and frame, its kind (and so
+/// the exit code: 2 for bad input, 1 for a failure while running) kept.
+fn at_node(e: Error, node: &str, frame: u32) -> Error {
+    match e {
+        Error::Numerical { message, hint, .. } => Error::Numerical {
+            node: node.to_string(),
+            frame,
+            message,
+            hint,
+        },
+        Error::Invalid(m) => Error::Invalid(format!("node '{node}', frame {frame}: {m}")),
+        Error::Run(m) => Error::Run(format!("node '{node}', frame {frame}: {m}")),
+        other => other,
+    }
 }
 
 /// The current values of Mesh nodes `names`, in order.
