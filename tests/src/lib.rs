@@ -189,3 +189,5 @@ pub mod drape {
         body
     }
 }
+
+pub mod skin;

@@ -11,6 +11,7 @@ pub mod field_stage;
 pub mod overrides;
 pub mod plan;
 pub mod report;
+pub mod rig;
 pub mod schedule;
 pub mod schema;
 

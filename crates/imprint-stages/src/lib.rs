@@ -10,5 +10,6 @@ pub mod ground;
 pub mod mesh;
 pub mod metrics;
 pub mod sdf;
+pub mod skin;
 pub mod snow;
 pub mod voxel;

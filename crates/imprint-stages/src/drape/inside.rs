@@ -241,6 +241,15 @@ impl InsideTest {
         self.exact(p)
     }
 
+    /// The parity of the surface crossings of the one ray from `p` along +x (T's fill test,
+    /// which projects the triangles on the y-z plane and counts them along x): `Some(true)`
+    /// when odd (inside a closed mesh), `None` when `p` lies on a triangle the ray meets.
+    /// Edges are owned half-open, so a ray through an edge shared by two triangles, or
+    /// through a vertex, counts one crossing there.
+    pub fn odd_along_x(&self, p: Vec3) -> Option<bool> {
+        self.axes[0].odd_crossings(p)
+    }
+
     /// [`InsideTest::inside`] by the three rays, without the voxel grid.
     pub fn exact(&self, p: Vec3) -> bool {
         let mut votes = 0;

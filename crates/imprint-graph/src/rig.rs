@@ -1,0 +1,1 @@
+//! Rig files: parsing and validating a rig (RON) with positions in errors (filled in by the rig work).

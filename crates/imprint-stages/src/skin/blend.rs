@@ -1,0 +1,1 @@
+//! Linear blend and dual quaternion skinning (filled in by the rig work).

@@ -1,0 +1,1 @@
+//! Volume, cross-section and self-intersection measures of skinned meshes (filled in by the rig work).

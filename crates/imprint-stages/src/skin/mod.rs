@@ -1,0 +1,17 @@
+//! Skin: deforming a mesh by a rig (METHODS.md §6, T §(3)): particle-based skinning with
+//! adaptive radii, beside linear blend (LBS) and dual quaternion (DQS) skinning.
+//!
+//! - [`rig`]: bones (head, tail, parent), the rest pose, keyframed and procedural animation,
+//!   and the pose at a time (per-bone skinning transforms).
+//! - [`weights`]: automatic weights for the blends.
+//! - [`blend`]: LBS and DQS.
+//! - [`fill`]: the adaptive close-packed particle fill.
+//! - [`particles`]: the particle skinning simulation and its vertices.
+//! - [`measure`]: volume, joint cross-section and self-intersection of a skinned mesh.
+
+pub mod blend;
+pub mod fill;
+pub mod measure;
+pub mod particles;
+pub mod rig;
+pub mod weights;

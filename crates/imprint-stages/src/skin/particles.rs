@@ -1,0 +1,1 @@
+//! Particle-based skinning: forces, leap-frog, vertices following particles (filled in by the particle work).

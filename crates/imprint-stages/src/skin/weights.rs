@@ -1,0 +1,1 @@
+//! Automatic skinning weights (filled in by the rig work).

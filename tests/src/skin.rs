@@ -1,0 +1,1 @@
+//! Skinning test pieces shared by the skinning tests (filled in by the rig work).
