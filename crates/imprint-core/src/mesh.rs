@@ -319,6 +319,40 @@ pub mod primitives {
         Mesh::new(pos, tris, "torus").expect("torus is valid")
     }
 
+    /// A closed limb: a capped cylinder of `radius` along +x from x = 0 to x = `length` (not
+    /// centred: a bone's head at the origin), `segments` around and `rings` quads along, so
+    /// `rings + 1` vertex rings (an even `rings` puts one at the middle, where a joint bends).
+    /// Welded and wound outward: `2 * segments * (rings + 1)` triangles.
+    pub fn cylinder(radius: f32, length: f32, segments: u32, rings: u32) -> Mesh {
+        let segments = segments.max(3);
+        let rings = rings.max(1);
+        let mut pos = Vec::new();
+        for i in 0..=rings {
+            let x = length * i as f32 / rings as f32;
+            for k in 0..segments {
+                let th = TAU * k as f32 / segments as f32;
+                pos.push(Vec3::new(x, radius * th.cos(), radius * th.sin()));
+            }
+        }
+        let start = pos.len() as u32;
+        pos.push(Vec3::ZERO);
+        pos.push(Vec3::new(length, 0.0, 0.0));
+        let id = |i: u32, k: u32| i * segments + (k % segments);
+        let mut tris = Vec::new();
+        for i in 0..rings {
+            for k in 0..segments {
+                let (a, b, c, d) = (id(i, k), id(i, k + 1), id(i + 1, k), id(i + 1, k + 1));
+                tris.push([a, b, d]);
+                tris.push([a, d, c]);
+            }
+        }
+        for k in 0..segments {
+            tris.push([start, id(0, k + 1), id(0, k)]);
+            tris.push([start + 1, id(rings, k), id(rings, k + 1)]);
+        }
+        Mesh::new(pos, tris, "cylinder").expect("cylinder is valid")
+    }
+
     /// A patch of `nu x nv` quads (two triangles each) over (a, b) in [0,1]^2 mapped by `f`,
     /// wound so that the normal is (df/da x df/db).
     fn grid_patch(nu: u32, nv: u32, f: impl Fn(f32, f32) -> Vec3) -> Mesh {
@@ -363,6 +397,10 @@ mod tests {
         let t = primitives::torus(2.0, 0.5, 64, 32);
         let exact = 2.0 * std::f64::consts::PI.powi(2) * 2.0 * 0.25;
         assert!((volume(&t) - exact).abs() / exact < 0.01);
+        let c = primitives::cylinder(0.5, 2.0, 64, 4);
+        let exact = 64.0 / 2.0 * 0.25 * (std::f64::consts::TAU / 64.0).sin() * 2.0;
+        assert!((volume(&c) - exact).abs() < 1e-5, "{} {exact}", volume(&c));
+        assert_eq!(c.triangles.len(), 2 * 64 * 5);
         let p = primitives::plane(2.0, 4);
         assert!(p.normals.iter().all(|n| (*n - Vec3::Y).length() < 1e-6));
     }

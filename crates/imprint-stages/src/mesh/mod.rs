@@ -182,6 +182,12 @@ fn build_primitive(p: &Primitive) -> Mesh {
             segments,
             sides,
         } => primitives::torus(major, minor, segments, sides),
+        Primitive::Cylinder {
+            radius,
+            length,
+            segments,
+            rings,
+        } => primitives::cylinder(radius, length, segments, rings),
     }
 }
 

@@ -95,6 +95,17 @@ pub enum Primitive {
         #[serde(default = "d32")]
         sides: u32,
     },
+    /// Capped cylinder (a limb) along +x from x = 0 to x = `length` (not centred: a bone's
+    /// head at the origin), `segments` around, `rings` quads along (an even number puts a
+    /// ring at the middle joint): `2 * segments * (rings + 1)` triangles.
+    Cylinder {
+        radius: f32,
+        length: f32,
+        #[serde(default = "d64")]
+        segments: u32,
+        #[serde(default = "d32")]
+        rings: u32,
+    },
 }
 
 fn d16() -> u32 {
@@ -308,6 +319,7 @@ impl Primitive {
             Primitive::Box { .. } => "Box",
             Primitive::Plane { .. } => "Plane",
             Primitive::Torus { .. } => "Torus",
+            Primitive::Cylinder { .. } => "Cylinder",
         }
     }
 
@@ -322,6 +334,9 @@ impl Primitive {
             Primitive::Torus {
                 segments, sides, ..
             } => 2 * segments as u64 * sides as u64,
+            Primitive::Cylinder {
+                segments, rings, ..
+            } => 2 * segments as u64 * (rings as u64 + 1),
         }
     }
 
@@ -357,6 +372,17 @@ impl Primitive {
                 positive(&f("minor"), minor)?;
                 at_least(&f("segments"), segments, 3)?;
                 at_least(&f("sides"), sides, 3)?;
+            }
+            Primitive::Cylinder {
+                radius,
+                length,
+                segments,
+                rings,
+            } => {
+                positive(&f("radius"), radius)?;
+                positive(&f("length"), length)?;
+                at_least(&f("segments"), segments, 3)?;
+                at_least(&f("rings"), rings, 1)?;
             }
         }
         let n = self.triangle_count();
