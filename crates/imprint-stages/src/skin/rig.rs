@@ -337,7 +337,8 @@ impl Rig {
             })
         };
         let what = format!(
-            "animation[{m}] {}(bone: \"{}\")",
+            "animation entry {} {}(bone: \"{}\")",
+            m + 1,
             motion.name(),
             motion.bone()
         );
