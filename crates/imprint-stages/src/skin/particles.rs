@@ -74,6 +74,20 @@ pub enum VertexRotation {
     Particle,
 }
 
+/// The inter-particle spring (a).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum Spring {
+    /// Toward the rest distance along the pair (T).
+    #[default]
+    Distance,
+    /// Toward the rest offset turned by the pair's rotation (the normalised mean of the two
+    /// particles' rotations, each the best fit of its neighbours' rest offsets to their
+    /// current ones, tracked every substep). A twist then pulls neighbours sideways instead
+    /// of toward the axis, so a twisted joint keeps its section (beyond T).
+    Corotated,
+}
+
 /// Everything the particle skinning needs besides the mesh and the bones. Every field may be
 /// left out; the defaults suit a limb of radius about 0.1 m at 24 frames per second.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -89,7 +103,7 @@ pub struct ParticleParams {
     pub bone_stiffness: f32,
     /// (d) Damping of the velocity (the bone point's taken as 0), 1/s. Default 60.
     pub bone_damping: f32,
-    /// Leap-frog steps per frame. Default 16.
+    /// Leap-frog steps per frame. Default 24.
     pub substeps: u32,
     /// Neighbours: pairs closer at rest than this × (r_i + r_j). Default 1.2 (FCC's 12
     /// touching neighbours, plus the nearest pairs across levels).
@@ -99,6 +113,8 @@ pub struct ParticleParams {
     pub max_deviation: f32,
     /// How vertex offsets are rotated. Default [`VertexRotation::Bone`] (T).
     pub vertex_rotation: VertexRotation,
+    /// The spring (a). Default [`Spring::Distance`] (T).
+    pub spring: Spring,
 }
 
 impl Default for ParticleParams {
@@ -109,10 +125,11 @@ impl Default for ParticleParams {
             damping: 60.0,
             bone_stiffness: 2500.0,
             bone_damping: 60.0,
-            substeps: 16,
+            substeps: 24,
             interaction_range: 1.2,
             max_deviation: 0.5,
             vertex_rotation: VertexRotation::Bone,
+            spring: Spring::Distance,
         }
     }
 }
@@ -208,6 +225,9 @@ pub struct ParticleSkin {
     vert_offsets: Vec<[Vec3; 4]>,
     /// The bones' current rotations (the last frame's end).
     bone_rot: Vec<Quat>,
+    /// Each particle's rotation, tracked every substep with [`Spring::Corotated`].
+    rot: Vec<Quat>,
+    rot_new: Vec<Quat>,
     bones: usize,
     deviation_limit: f32,
 }
@@ -300,6 +320,8 @@ impl ParticleSkin {
             vert_particles,
             vert_offsets,
             bone_rot: vec![Quat::IDENTITY; bones.len()],
+            rot: vec![Quat::IDENTITY; n],
+            rot_new: vec![Quat::IDENTITY; n],
             bones: bones.len(),
             deviation_limit: params.max_deviation * diag.max(1e-6),
         })
@@ -357,8 +379,27 @@ impl ParticleSkin {
                     Affine3A::from_rotation_translation(q0.slerp(q, u), t0.lerp(t1, u))
                 })
                 .collect();
+            let corotated = self.params.spring == Spring::Corotated;
+            if corotated {
+                // Pass 0: each particle's rotation, a few iterations from the last one.
+                let (x, rest, st, nb, rot) =
+                    (&self.x, &self.rest, &self.start, &self.nbr, &self.rot);
+                self.rot_new
+                    .par_chunks_mut(CHUNK)
+                    .enumerate()
+                    .for_each(|(c, out)| {
+                        for (k, o) in out.iter_mut().enumerate() {
+                            let i = c * CHUNK + k;
+                            let a =
+                                neighbourhood(x, rest, &nb[st[i] as usize..st[i + 1] as usize], i);
+                            *o = extract_rotation(&a, rot[i], 2);
+                        }
+                    });
+                std::mem::swap(&mut self.rot, &mut self.rot_new);
+            }
             // Pass 1: accelerations from x_n and the estimated v_n.
             {
+                let rot = &self.rot;
                 let (x, v, a, rest, bone) = (&self.x, &self.v, &self.a, &self.rest, &self.bone);
                 let (st, nb, rl, wt) = (&self.start, &self.nbr, &self.rest_len, &self.weight);
                 let half = 0.5 * h;
@@ -380,8 +421,19 @@ impl ParticleSkin {
                                 }
                                 let n = dx / d;
                                 let vj = v[j] + half * a[j];
-                                let f = ks * (d - rl[e]) + cs * (vj - vi).dot(n);
-                                acc += (wt[e] * f) * n;
+                                if corotated {
+                                    let (qi, mut qj) = (rot[i], rot[j]);
+                                    if qi.dot(qj) < 0.0 {
+                                        qj = -qj;
+                                    }
+                                    let r = (qi + qj).normalize();
+                                    let off = r * (rest[j] - rest[i]);
+                                    let f = ks * (dx - off) + (cs * (vj - vi).dot(n)) * n;
+                                    acc += wt[e] * f;
+                                } else {
+                                    let f = ks * (d - rl[e]) + cs * (vj - vi).dot(n);
+                                    acc += (wt[e] * f) * n;
+                                }
                             }
                             let target = tf[bone[i] as usize].transform_point3(rest[i]);
                             acc += kb * (target - xi) - cb * vi;
@@ -496,14 +548,13 @@ impl ParticleSkin {
         (0..self.x.len())
             .into_par_iter()
             .map(|i| {
-                let mut a = Mat3::ZERO;
-                for e in self.start[i] as usize..self.start[i + 1] as usize {
-                    let j = self.nbr[e] as usize;
-                    let d = self.x[j] - self.x[i];
-                    let r = self.rest[j] - self.rest[i];
-                    a += Mat3::from_cols(d * r.x, d * r.y, d * r.z);
-                }
-                extract_rotation(&a, self.bone_rot[self.bone[i] as usize])
+                let nb = &self.nbr[self.start[i] as usize..self.start[i + 1] as usize];
+                let a = neighbourhood(&self.x, &self.rest, nb, i);
+                let from = match self.params.spring {
+                    Spring::Corotated => self.rot[i],
+                    Spring::Distance => self.bone_rot[self.bone[i] as usize],
+                };
+                extract_rotation(&a, from, 20)
             })
             .collect()
     }
@@ -543,20 +594,34 @@ impl ParticleSkin {
     }
 }
 
-/// The rotation part of `a` (Müller et al.'s iteration on a quaternion, 20 fixed rounds from
-/// `q`): deterministic, and falls back to `q` where `a` carries no rotation.
-fn extract_rotation(a: &Mat3, mut q: Quat) -> Quat {
-    for _ in 0..20 {
+/// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
+/// into current ones.
+fn neighbourhood(x: &[Vec3], rest: &[Vec3], nb: &[u32], i: usize) -> Mat3 {
+    let mut a = Mat3::ZERO;
+    for &j in nb {
+        let d = x[j as usize] - x[i];
+        let r = rest[j as usize] - rest[i];
+        a += Mat3::from_cols(d * r.x, d * r.y, d * r.z);
+    }
+    a
+}
+
+/// The rotation part of `a` (Müller et al.'s iteration on a quaternion, `rounds` fixed rounds
+/// from `q`): deterministic, and falls back to `q` where `a` carries no rotation.
+fn extract_rotation(a: &Mat3, mut q: Quat, rounds: u32) -> Quat {
+    for _ in 0..rounds {
         let r = Mat3::from_quat(q);
         let num = r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
         let den = (r.x_axis.dot(a.x_axis) + r.y_axis.dot(a.y_axis) + r.z_axis.dot(a.z_axis)).abs()
             + 1e-20;
         let w = num / den;
-        let angle = w.length();
-        if angle < 1e-9 {
+        if w.length_squared() < 1e-18 {
             break;
         }
-        q = (Quat::from_axis_angle(w / angle, angle) * q).normalize();
+        // The turn by |w| about w, with tan(½·angle) = ½|w| in place of the sine and cosine
+        // (the same direction, a shorter step for large turns; the fixed point is the same).
+        let step = Quat::from_xyzw(0.5 * w.x, 0.5 * w.y, 0.5 * w.z, 1.0).normalize();
+        q = (step * q).normalize();
     }
     q
 }
@@ -764,7 +829,7 @@ mod tests {
     fn rotation_extraction_finds_a_rotation() {
         let q = Quat::from_rotation_x(2.5) * Quat::from_rotation_z(0.3);
         let a = Mat3::from_quat(q) * Mat3::from_diagonal(Vec3::new(1.2, 0.9, 1.0));
-        let r = extract_rotation(&a, Quat::IDENTITY);
+        let r = extract_rotation(&a, Quat::IDENTITY, 40);
         assert!(r.angle_between(q) < 1e-3, "{r} {q}");
     }
 
