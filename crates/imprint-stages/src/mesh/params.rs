@@ -647,7 +647,11 @@ mod tests {
             let text = ron::to_string(&p).unwrap();
             assert_eq!(parse(&text).unwrap(), p, "{text}");
         }
-        for prim in ["Plane(size: 2)", "Torus(major: 1, minor: 0.25)"] {
+        for prim in [
+            "Plane(size: 2)",
+            "Torus(major: 1, minor: 0.25)",
+            "Cylinder(radius: 0.1, length: 1)",
+        ] {
             let p = parse(&format!("(primitive: {prim})")).unwrap();
             p.validate().unwrap();
         }
@@ -730,6 +734,14 @@ mod tests {
             (
                 r#"(primitive: Torus(major: 1, minor: 0.2, sides: 1))"#,
                 "primitive Torus.sides must be >= 3",
+            ),
+            (
+                r#"(primitive: Cylinder(radius: 0.1, length: 0))"#,
+                "primitive Cylinder.length must be > 0, got 0",
+            ),
+            (
+                r#"(primitive: Cylinder(radius: 0.1, length: 1, rings: 0))"#,
+                "primitive Cylinder.rings must be >= 1",
             ),
             (
                 r#"(primitive: Sphere(radius: 1, segments: 100000, rings: 100000))"#,

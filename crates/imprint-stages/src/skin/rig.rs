@@ -489,6 +489,24 @@ impl Rig {
             .join(", ")
     }
 
+    /// The time (seconds) after which the animation holds still: the last key's time or the
+    /// end of the last ramp (0 without animation). A pipeline at `fps` poses frame f at
+    /// `pose(f as f32 / fps)`.
+    pub fn duration(&self) -> f32 {
+        self.animation
+            .iter()
+            .map(|m| match m {
+                Motion::Keys { keys, .. } => keys.last().map_or(0.0, |k| k.time),
+                Motion::Bend {
+                    start, duration, ..
+                }
+                | Motion::Twist {
+                    start, duration, ..
+                } => start + duration,
+            })
+            .fold(0.0, f32::max)
+    }
+
     /// (head, tail) per bone at rest, in bone order.
     pub fn rest_segments(&self) -> Vec<(Vec3, Vec3)> {
         self.bones.iter().map(|b| (b.head, b.tail)).collect()
@@ -765,6 +783,60 @@ mod tests {
     }
 
     #[test]
+    fn step_smooth_opposite_axes_and_translation_tracks() {
+        let mut rig = limb();
+        let rot = |time, axis, degrees| Key {
+            time,
+            rotation: Some(AxisAngle { axis, degrees }),
+            translation: None,
+        };
+        let angle_at = |rig: &Rig, t| {
+            let p = rig.pose(t).skin[1].transform_point3(Vec3::new(0.5, 0.1, 0.0));
+            // Turned about x through the head: the angle of (y, z).
+            p.z.atan2(p.y).to_degrees()
+        };
+        for (interp, expect) in [
+            (Interpolation::Step, 0.0),
+            (Interpolation::Linear, 25.0),
+            (Interpolation::Smooth, 100.0 * 0.25 * 0.25 * 2.5),
+        ] {
+            // The second key written with the opposite axis and angle: the same rotation.
+            rig.animation = vec![Motion::Keys {
+                bone: "lower".into(),
+                interpolation: interp,
+                keys: vec![rot(0.0, Vec3::X, 0.0), rot(1.0, -Vec3::X, -100.0)],
+            }];
+            let a = angle_at(&rig, 0.25);
+            assert!((a - expect).abs() < 1e-3, "{interp:?}: {a} vs {expect}");
+            assert!((angle_at(&rig, 5.0) - 100.0).abs() < 1e-3);
+            assert!(angle_at(&rig, -1.0).abs() < 1e-3);
+        }
+        rig.animation = vec![Motion::Keys {
+            bone: "upper".into(),
+            interpolation: Interpolation::Linear,
+            keys: vec![
+                Key {
+                    time: 1.0,
+                    rotation: None,
+                    translation: Some(Vec3::ZERO),
+                },
+                rot(2.0, Vec3::Z, 90.0),
+                Key {
+                    time: 3.0,
+                    rotation: None,
+                    translation: Some(Vec3::new(0.0, 0.0, 2.0)),
+                },
+            ],
+        }];
+        rig.validate().unwrap();
+        assert_eq!(rig.duration(), 3.0);
+        // At t = 2: half the translation; the rotation track has one key (held).
+        let p = rig.pose(2.0);
+        let tail = rig.posed_segments(&p)[1].1;
+        assert!((tail - Vec3::new(0.0, 1.0, 1.0)).length() < 1e-5, "{tail}");
+    }
+
+    #[test]
     fn procedural_motions_compose_in_order() {
         let mut rig = limb();
         rig.animation = vec![
@@ -783,6 +855,7 @@ mod tests {
             },
         ];
         rig.validate().unwrap();
+        assert_eq!(rig.duration(), 2.0);
         let p = rig.pose(0.5);
         // Half-way through the smooth ramp: 45°.
         let tail = p.skin[1].transform_point3(Vec3::X);
