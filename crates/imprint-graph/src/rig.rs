@@ -56,13 +56,13 @@ pub fn parse(source: &Source, base_dir: &Path) -> Result<LoadedRig> {
             Error::from(err)
         })?;
     if let Some(p) = rig.problem() {
-        return Err(locate(source, &rig, p.place, p.message).into());
+        return Err(locate(source, p.place, p.message).into());
     }
     let mesh = match &rig.mesh {
         Some(m) => {
             let path = base_dir.join(m);
             if !path.is_file() {
-                let span = Scan::new(&source.text).place(&rig, Place::Mesh);
+                let span = Scan::new(&source.text).place(Place::Mesh);
                 return Err(source
                     .error(
                         span,
@@ -98,8 +98,8 @@ fn ron_help(message: &str) -> Option<String> {
 }
 
 /// An error at the place a validation problem names.
-fn locate(source: &Source, rig: &Rig, place: Place, message: String) -> PipelineError {
-    let span = Scan::new(&source.text).place(rig, place);
+fn locate(source: &Source, place: Place, message: String) -> PipelineError {
+    let span = Scan::new(&source.text).place(place);
     let label = match place {
         Place::Bone { field, .. } | Place::Motion { field, .. } if !field.is_empty() => {
             format!("this {field}")
@@ -273,7 +273,7 @@ impl<'a> Scan<'a> {
     }
 
     /// The byte span a rig place refers to (the best match found; the whole rig otherwise).
-    fn place(&self, _rig: &Rig, place: Place) -> Range<usize> {
+    fn place(&self, place: Place) -> Range<usize> {
         if self.toks.is_empty() {
             return 0..0;
         }
@@ -345,16 +345,14 @@ mod tests {
             .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
             .from_str(text)
             .unwrap();
-        let span = s.place(
-            &rig,
-            Place::Bone {
-                bone: 1,
-                field: "parent",
-            },
-        );
+        assert_eq!(rig.bones.len(), 2, "the text is a valid rig");
+        let span = s.place(Place::Bone {
+            bone: 1,
+            field: "parent",
+        });
         assert_eq!(&text[span.clone()], "\"a\"");
         assert_eq!(src.line_col(span.start), (3, 66));
-        let span = s.place(&rig, Place::Bone { bone: 0, field: "" });
+        let span = s.place(Place::Bone { bone: 0, field: "" });
         assert!(text[span].starts_with("(name: \"a,(\""));
     }
 }
