@@ -99,9 +99,12 @@ pub struct ParticleParams {
     pub stiffness: f32,
     /// (b) Damping of the pair's relative velocity along the pair, 1/s. Default 60.
     pub damping: f32,
-    /// (c) Pull toward the bone's target, per unit mass, 1/s². Default 2500.
+    /// (c) Pull toward the bone's target, per unit mass, 1/s². Default 150: soft against
+    /// `stiffness`, so that a twist spreads over the joint instead of tearing it (the
+    /// ratio sets the spread, about √(stiffness / bone_stiffness) particle layers).
     pub bone_stiffness: f32,
-    /// (d) Damping of the velocity (the bone point's taken as 0), 1/s. Default 60.
+    /// (d) Damping of the velocity (the bone point's taken as 0), 1/s. Default 20 (about
+    /// 0.8 of critical for the default bone pull).
     pub bone_damping: f32,
     /// Leap-frog steps per frame. Default 24.
     pub substeps: u32,
@@ -111,10 +114,13 @@ pub struct ParticleParams {
     /// Blow-up: a particle farther than this × the rest mesh's box diagonal from its bone's
     /// target. Default 0.5.
     pub max_deviation: f32,
-    /// How vertex offsets are rotated. Default [`VertexRotation::Bone`] (T).
+    /// How vertex offsets are rotated. Default [`VertexRotation::Particle`] (T: `Bone`).
     pub vertex_rotation: VertexRotation,
-    /// The spring (a). Default [`Spring::Distance`] (T).
+    /// The spring (a). Default [`Spring::Corotated`] (T: `Distance`).
     pub spring: Spring,
+    /// Pressure between neighbours where their neighbourhoods lost volume (J = det of the
+    /// best-fit deformation < 1), 1/s²; 0 is off (T). Default 40000.
+    pub volume_stiffness: f32,
 }
 
 impl Default for ParticleParams {
@@ -123,13 +129,30 @@ impl Default for ParticleParams {
             fill: FillParams::default(),
             stiffness: 40000.0,
             damping: 60.0,
-            bone_stiffness: 2500.0,
-            bone_damping: 60.0,
+            bone_stiffness: 150.0,
+            bone_damping: 20.0,
             substeps: 24,
             interaction_range: 1.2,
             max_deviation: 0.5,
+            vertex_rotation: VertexRotation::Particle,
+            spring: Spring::Corotated,
+            volume_stiffness: 40000.0,
+        }
+    }
+}
+
+impl ParticleParams {
+    /// T's forces and vertices as published: distance springs, no pressure, offsets turned
+    /// by the bone, and a stiffer bone pull (which a distance-spring lattice needs to hold
+    /// its shape). Collapses under a strong twist (see the module doc).
+    pub fn t_method() -> Self {
+        ParticleParams {
+            bone_stiffness: 2500.0,
+            bone_damping: 60.0,
             vertex_rotation: VertexRotation::Bone,
             spring: Spring::Distance,
+            volume_stiffness: 0.0,
+            ..Default::default()
         }
     }
 }
@@ -146,6 +169,7 @@ impl ParticleParams {
             ("damping", self.damping),
             ("bone_stiffness", self.bone_stiffness),
             ("bone_damping", self.bone_damping),
+            ("volume_stiffness", self.volume_stiffness),
         ];
         for (name, v) in non_neg {
             if !(v.is_finite() && v >= 0.0) {
@@ -228,6 +252,10 @@ pub struct ParticleSkin {
     /// Each particle's rotation, tracked every substep with [`Spring::Corotated`].
     rot: Vec<Quat>,
     rot_new: Vec<Quat>,
+    /// Per particle: (Σ_j (X_j − X_i)(X_j − X_i)ᵀ)⁻¹ (None when its neighbours span no
+    /// volume), and the current volume change J.
+    rest_inv: Vec<Option<Mat3>>,
+    jac: Vec<f32>,
     bones: usize,
     deviation_limit: f32,
 }
@@ -301,6 +329,19 @@ impl ParticleSkin {
             })
             .unzip();
         let diag = rest.bounds().size().length();
+        let rest_inv: Vec<Option<Mat3>> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let b = neighbourhood(
+                    &positions,
+                    &positions,
+                    &nbr[start[i] as usize..start[i + 1] as usize],
+                    i,
+                );
+                let scale = b.x_axis.length() + b.y_axis.length() + b.z_axis.length();
+                (b.determinant().abs() > 1e-6 * scale.powi(3)).then(|| b.inverse())
+            })
+            .collect();
         Ok(ParticleSkin {
             node: "skin".into(),
             params: params.clone(),
@@ -322,6 +363,8 @@ impl ParticleSkin {
             bone_rot: vec![Quat::IDENTITY; bones.len()],
             rot: vec![Quat::IDENTITY; n],
             rot_new: vec![Quat::IDENTITY; n],
+            rest_inv,
+            jac: vec![1.0; n],
             bones: bones.len(),
             deviation_limit: params.max_deviation * diag.max(1e-6),
         })
@@ -380,26 +423,43 @@ impl ParticleSkin {
                 })
                 .collect();
             let corotated = self.params.spring == Spring::Corotated;
-            if corotated {
-                // Pass 0: each particle's rotation, a few iterations from the last one.
-                let (x, rest, st, nb, rot) =
-                    (&self.x, &self.rest, &self.start, &self.nbr, &self.rot);
+            let kv = self.params.volume_stiffness;
+            if corotated || kv > 0.0 {
+                // Pass 0: each particle's rotation (a few iterations from the last one) and
+                // its neighbourhood's volume change J = det(A B⁻¹).
+                let (x, rest, st, nb, rot, binv) = (
+                    &self.x,
+                    &self.rest,
+                    &self.start,
+                    &self.nbr,
+                    &self.rot,
+                    &self.rest_inv,
+                );
                 self.rot_new
                     .par_chunks_mut(CHUNK)
+                    .zip(self.jac.par_chunks_mut(CHUNK))
                     .enumerate()
-                    .for_each(|(c, out)| {
-                        for (k, o) in out.iter_mut().enumerate() {
+                    .for_each(|(c, (out, jac))| {
+                        for k in 0..out.len() {
                             let i = c * CHUNK + k;
                             let a =
                                 neighbourhood(x, rest, &nb[st[i] as usize..st[i + 1] as usize], i);
-                            *o = extract_rotation(&a, rot[i], 2);
+                            if corotated {
+                                out[k] = extract_rotation(&a, rot[i], 2);
+                            }
+                            jac[k] = match binv[i] {
+                                Some(b) => (a * b).determinant(),
+                                None => 1.0,
+                            };
                         }
                     });
-                std::mem::swap(&mut self.rot, &mut self.rot_new);
+                if corotated {
+                    std::mem::swap(&mut self.rot, &mut self.rot_new);
+                }
             }
             // Pass 1: accelerations from x_n and the estimated v_n.
             {
-                let rot = &self.rot;
+                let (rot, jac) = (&self.rot, &self.jac);
                 let (x, v, a, rest, bone) = (&self.x, &self.v, &self.a, &self.rest, &self.bone);
                 let (st, nb, rl, wt) = (&self.start, &self.nbr, &self.rest_len, &self.weight);
                 let half = 0.5 * h;
@@ -421,6 +481,10 @@ impl ParticleSkin {
                                 }
                                 let n = dx / d;
                                 let vj = v[j] + half * a[j];
+                                if kv > 0.0 {
+                                    // Pressure: apart when the pair's neighbourhoods shrank.
+                                    acc += (wt[e] * kv * (0.5 * (jac[i] + jac[j]) - 1.0)) * dx;
+                                }
                                 if corotated {
                                     let (qi, mut qj) = (rot[i], rot[j]);
                                     if qi.dot(qj) < 0.0 {
