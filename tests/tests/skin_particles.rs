@@ -306,7 +306,12 @@ fn same_bytes_on_any_thread_count() {
 #[test]
 fn frame_cost_at_5k_particles_and_10k_vertices() {
     let (mesh, rig) = two_bone_limb(R, 1.4, 100, 100);
-    let mut skin = ParticleSkin::new(&mesh, &rig.rest_segments(), &Default::default()).unwrap();
+    let params = if std::env::var("TM").is_ok() {
+        ParticleParams::t_method()
+    } else {
+        Default::default()
+    };
+    let mut skin = ParticleSkin::new(&mesh, &rig.rest_segments(), &params).unwrap();
     let pose = |f: u32| bend(&rig, ramp(f, 24, 60.0)).skin;
     let frames = 24;
     let (mut sim, mut verts) = (0.0, 0.0);

@@ -236,13 +236,16 @@ pub struct ParticleSkin {
     x: Vec<Vec3>,
     /// Velocities at the last half step.
     v: Vec<Vec3>,
-    /// Accelerations of the last step.
-    a: Vec<Vec3>,
+    /// Accelerations of this step.
     a_new: Vec<Vec3>,
+    /// The velocities at the step estimated for the next force pass, `v + (h/2) a`.
+    ve: Vec<Vec3>,
     /// CSR neighbour lists: `nbr[start[i]..start[i+1]]`, with rest length and m_j / (m_i + m_j).
     start: Vec<u32>,
     nbr: Vec<u32>,
     rest_len: Vec<f32>,
+    /// Per neighbour entry: X_j − X_i.
+    rest_off: Vec<Vec3>,
     weight: Vec<f32>,
     /// Per vertex: 4 particles and the rest offsets from them to the vertex.
     vert_particles: Vec<[u32; 4]>,
@@ -329,6 +332,10 @@ impl ParticleSkin {
             })
             .unzip();
         let diag = rest.bounds().size().length();
+        let rest_off: Vec<Vec3> = (0..n)
+            .flat_map(|i| (start[i]..start[i + 1]).map(move |e| (i, e as usize)))
+            .map(|(i, e)| positions[nbr[e] as usize] - positions[i])
+            .collect();
         let rest_inv: Vec<Option<Mat3>> = (0..n)
             .into_par_iter()
             .map(|i| {
@@ -352,8 +359,9 @@ impl ParticleSkin {
             bone,
             x: positions,
             v: vec![Vec3::ZERO; n],
-            a: vec![Vec3::ZERO; n],
             a_new: vec![Vec3::ZERO; n],
+            ve: vec![Vec3::ZERO; n],
+            rest_off,
             start,
             nbr,
             rest_len,
@@ -445,7 +453,7 @@ impl ParticleSkin {
                             let a =
                                 neighbourhood(x, rest, &nb[st[i] as usize..st[i + 1] as usize], i);
                             if corotated {
-                                out[k] = extract_rotation(&a, rot[i], 2);
+                                out[k] = extract_rotation(&a, rot[i], 1);
                             }
                             jac[k] = match binv[i] {
                                 Some(b) => (a * b).determinant(),
@@ -460,9 +468,14 @@ impl ParticleSkin {
             // Pass 1: accelerations from x_n and the estimated v_n.
             {
                 let (rot, jac) = (&self.rot, &self.jac);
-                let (x, v, a, rest, bone) = (&self.x, &self.v, &self.a, &self.rest, &self.bone);
-                let (st, nb, rl, wt) = (&self.start, &self.nbr, &self.rest_len, &self.weight);
-                let half = 0.5 * h;
+                let (x, ve, rest, bone) = (&self.x, &self.ve, &self.rest, &self.bone);
+                let (st, nb, rl, wt, ro) = (
+                    &self.start,
+                    &self.nbr,
+                    &self.rest_len,
+                    &self.weight,
+                    &self.rest_off,
+                );
                 self.a_new
                     .par_chunks_mut(CHUNK)
                     .enumerate()
@@ -470,7 +483,7 @@ impl ParticleSkin {
                         for (k, o) in out.iter_mut().enumerate() {
                             let i = c * CHUNK + k;
                             let xi = x[i];
-                            let vi = v[i] + half * a[i];
+                            let vi = ve[i];
                             let mut acc = Vec3::ZERO;
                             for e in st[i] as usize..st[i + 1] as usize {
                                 let j = nb[e] as usize;
@@ -480,7 +493,7 @@ impl ParticleSkin {
                                     continue;
                                 }
                                 let n = dx / d;
-                                let vj = v[j] + half * a[j];
+                                let vj = ve[j];
                                 if kv > 0.0 {
                                     // Pressure: apart when the pair's neighbourhoods shrank.
                                     acc += (wt[e] * kv * (0.5 * (jac[i] + jac[j]) - 1.0)) * dx;
@@ -491,7 +504,7 @@ impl ParticleSkin {
                                         qj = -qj;
                                     }
                                     let r = (qi + qj).normalize();
-                                    let off = r * (rest[j] - rest[i]);
+                                    let off = r * ro[e];
                                     let f = ks * (dx - off) + (cs * (vj - vi).dot(n)) * n;
                                     acc += wt[e] * f;
                                 } else {
@@ -521,16 +534,16 @@ impl ParticleSkin {
                 .x
                 .par_chunks_mut(CHUNK)
                 .zip(self.v.par_chunks_mut(CHUNK))
-                .zip(self.a.par_chunks_mut(CHUNK))
+                .zip(self.ve.par_chunks_mut(CHUNK))
                 .enumerate()
-                .map(|(c, ((xs, vs), as_))| {
+                .map(|(c, ((xs, vs), ves))| {
                     let mut bad = None;
                     for k in 0..xs.len() {
                         let i = c * CHUNK + k;
                         let an = a_new[i];
                         vs[k] += h * an;
                         xs[k] += h * vs[k];
-                        as_[k] = an;
+                        ves[k] = vs[k] + (0.5 * h) * an;
                         if bad.is_none() {
                             let target = tf_next[bone[i] as usize].transform_point3(rest[i]);
                             let dev = xs[k].distance(target);
