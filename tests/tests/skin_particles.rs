@@ -275,6 +275,43 @@ fn time_step_limit_and_blow_up_is_named() {
 }
 
 #[test]
+#[ignore]
+fn explore_limits() {
+    let (mesh, rig) = limb();
+    let motion = |t: f32| bend(&rig, 90.0 * (t / 0.25).min(1.0)).skin;
+    let variants: Vec<(&str, ParticleParams)> = vec![
+        ("defaults", ParticleParams::default()),
+        (
+            "cs 0",
+            ParticleParams {
+                damping: 0.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "kv 0",
+            ParticleParams {
+                volume_stiffness: 0.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "cs 20",
+            ParticleParams {
+                damping: 20.0,
+                ..Default::default()
+            },
+        ),
+        ("T", ParticleParams::t_method()),
+    ];
+    for (name, p) in variants {
+        let skin = ParticleSkin::new(&mesh, &rig.rest_segments(), &p).unwrap();
+        let h = time_step_limit(&skin, &motion, 400, 1e-4, 0.02, 8);
+        println!("limit {name}: {:.3} ms", 1e3 * h);
+    }
+}
+
+#[test]
 fn same_bytes_on_any_thread_count() {
     let (mesh, rig) = two_bone_limb(R, LEN, 16, 10);
     let go = |threads: usize| {
