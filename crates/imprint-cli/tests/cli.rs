@@ -981,3 +981,67 @@ fn a_failing_stage_names_node_and_frame_and_exits_1() {
     assert!(!c.dir.path().join("o/h/s_0000.npy").exists());
     assert!(!c.dir.path().join("o/report.json").exists());
 }
+
+/// One pipeline drops two cloths on the same sphere, one colliding through its distance field
+/// and one through its depth maps: both rest on it, none inside, at the same height within a
+/// few texels; a cloth with depth colliders asked to run on the GPU is refused.
+#[test]
+fn a_pipeline_compares_the_field_and_depth_map_colliders() {
+    let cloth = |name: &str, colliders: &str| {
+        format!(
+            r#"        "{name}": Cloth({colliders}
+            params: (
+                shape: Grid(size: (0.9, 0.9), resolution: (17, 17), center: (0, 0.42, 0), normal: (0, 1, 0)),
+                material: Harada(k_structural: 60.0, k_shear: 15.0),
+                mass: 0.001, damping: 0.995, collision: (epsilon: 0.01, friction: 0.5), substeps: 16,
+            )),
+"#
+        )
+    };
+    let nodes = format!(
+        r#"        "ball": Mesh(primitive: Sphere(radius: 0.3, segments: 96, rings: 48)),
+        "boundary": Voxelize(mesh: "ball", grid: Fit(resolution: 48, padding: 0.2)),
+        "field": DistanceField(boundary: "boundary", band: 3),
+{}{}        "obj": WriteMesh(mesh: "by_maps", every: 59),
+        "obj_field": WriteMesh(mesh: "by_field", every: 59),"#,
+        cloth("by_field", r#"colliders: ["field"],"#),
+        cloth(
+            "by_maps",
+            r#"depth_colliders: [(body: "ball", params: (views: [(0, -1, 0), (0, 0, -1), (1, 0, 0)], resolution: 192))],"#
+        ),
+    );
+    let c = case_timed(&nodes, "frames: 60, fps: 60");
+    run_ok(
+        &["run", c.file.to_str().unwrap(), "--out", "o"],
+        c.dir.path(),
+    );
+    let report = read_json(&c.dir.path().join("o/report.json"));
+    for n in ["by_field", "by_maps"] {
+        let frames = report["nodes"][n]["metrics"]["per_frame"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{n}: {}", report["nodes"][n]));
+        assert!(frames.iter().all(|f| f["inside"] == 0), "{n}: {frames:?}");
+        assert!(
+            frames.last().unwrap()["contacts"].as_u64().unwrap() > 20,
+            "{n}"
+        );
+        assert_eq!(report["nodes"][n]["backend"], "cpu");
+    }
+    // The resting cloth's middle over the pole: ε above the sphere on both.
+    let top = |file: &str| {
+        let m = imprint_core::Mesh::load_obj(&c.dir.path().join(file)).unwrap();
+        m.positions.iter().map(|p| p.y).fold(f32::MIN, f32::max)
+    };
+    let (maps, field) = (
+        top("o/obj/by_maps_0059.obj"),
+        top("o/obj_field/by_field_0059.obj"),
+    );
+    assert!(
+        (maps - 0.31).abs() < 0.003,
+        "depth-map cloth rests at {maps}"
+    );
+    assert!((field - 0.31).abs() < 0.003, "field cloth rests at {field}");
+    // A cloth with depth colliders is a CPU cloth: asking for the GPU is an input error.
+    let bad = nodes.replace("depth_colliders: [", "backend: Gpu, depth_colliders: [");
+    expect_invalid(&bad, &["by_maps", "backend", "depth_colliders"]);
+}

@@ -13,6 +13,7 @@ use crate::schema::{
     RenderNode, RenderObject,
 };
 use imprint_core::bvh::Bvh;
+use imprint_core::raster::rasterize_depth_with;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, GridSpec, HeightField, Mesh};
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
@@ -23,6 +24,7 @@ use imprint_render::slice::SliceOptions;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
 use imprint_stages::cloth::{Body, ClothSim};
 use imprint_stages::depth::{HeightRegion, HeightView};
+use imprint_stages::drape::{DepthCamera, DepthColliderParams, DepthPose};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::gpu::GpuField;
 use imprint_stages::voxel::cpu::Voxelizer;
@@ -112,6 +114,8 @@ enum Stage {
         /// (uploaded once per field: a static field is not uploaded again).
         gpu: Option<Box<GpuCloth>>,
         gpu_previous: Vec<(Arc<DistanceField>, Arc<GpuCollider>)>,
+        /// Bodies read through depth maps (CPU cloth only).
+        depth: Vec<DepthBody>,
     },
     /// A ground that keeps its prints from frame to frame.
     Ground {
@@ -413,6 +417,7 @@ pub fn run_observed(
                     previous,
                     gpu: gpu_cloth,
                     gpu_previous,
+                    depth,
                 } => {
                     let dt = 1.0 / plan.file.fps;
                     let (m, mesh) = if let Some(g) = gpu_cloth {
@@ -483,7 +488,24 @@ pub fn run_observed(
                                 span: *span,
                             })
                             .collect();
-                        let m = sim.step_frame_between(&bodies, frame, dt)?;
+                        let mut poses = Vec::with_capacity(depth.len());
+                        for d in depth.iter_mut() {
+                            let Some(Value::Mesh(mesh)) = values.get(d.body.as_str()) else {
+                                unreachable!("edges are typed")
+                            };
+                            poses.push(d.poses(mesh)?);
+                        }
+                        let depth_colliders: Vec<_> = depth
+                            .iter()
+                            .zip(&poses)
+                            .map(|(d, (start, end))| {
+                                d.camera
+                                    .as_ref()
+                                    .expect("poses set it")
+                                    .collider(start.as_deref(), end)
+                            })
+                            .collect();
+                        let m = sim.step_frame_between(&bodies, &depth_colliders, frame, dt)?;
                         *previous = ends.into_iter().map(|(_, e, _)| e).collect();
                         (serde_json::to_value(m).expect("plain data"), sim.to_mesh())
                     };
@@ -1169,6 +1191,63 @@ fn gpu_rasterizer(
     })
 }
 
+/// A cloth's body read through depth maps: its fixed cameras (over the body's swept box when
+/// it is a Mesh node, else over its first pose, and rebuilt wider if it leaves that box) and
+/// its pose at the previous frame's end, the start of this one.
+struct DepthBody {
+    body: String,
+    params: DepthColliderParams,
+    eps: f32,
+    swept: Option<imprint_core::Aabb>,
+    camera: Option<DepthCamera>,
+    previous: Option<(Arc<Mesh>, Arc<DepthPose>)>,
+}
+
+impl DepthBody {
+    /// The poses at the frame's start (None on the first frame) and end, for `mesh`.
+    fn poses(
+        &mut self,
+        mesh: &Arc<Mesh>,
+    ) -> crate::Result<(Option<Arc<DepthPose>>, Arc<DepthPose>)> {
+        let render = rasterize_depth_with;
+        let bounds = mesh.bounds();
+        let prev_bounds = self.previous.as_ref().map(|(m, _)| m.bounds());
+        let seen = |c: &DepthCamera| c.sees(&bounds) && prev_bounds.is_none_or(|b| c.sees(&b));
+        if !self.camera.as_ref().is_some_and(seen) {
+            // First frame: the swept box if known. Later (the body left the box): the two
+            // poses' box grown by a quarter, so that this happens rarely.
+            let mut b = match (&self.camera, self.swept) {
+                (None, Some(s)) => s.union(&bounds),
+                _ => bounds,
+            };
+            if let Some(p) = prev_bounds {
+                b = b.union(&p);
+            }
+            if self.camera.is_some() || self.swept.is_none() {
+                let grow = 0.25 * b.size().max_element();
+                b.min -= glam::Vec3::splat(grow);
+                b.max += glam::Vec3::splat(grow);
+            }
+            let camera = DepthCamera::new(&b, &self.params, self.eps)?;
+            if let Some((m, pose)) = &mut self.previous {
+                *pose = Arc::new(camera.pose(m, render)?);
+            }
+            self.camera = Some(camera);
+        }
+        let camera = self.camera.as_ref().expect("set above");
+        let end = match &self.previous {
+            // A body that did not change keeps its maps.
+            Some((m, pose)) if Arc::ptr_eq(m, mesh) => pose.clone(),
+            _ => Arc::new(camera.pose(mesh, render)?),
+        };
+        let start = self
+            .previous
+            .replace((mesh.clone(), end.clone()))
+            .map(|(_, p)| p);
+        Ok((start, end))
+    }
+}
+
 /// Which backend a node with two paths runs on.
 fn choose_gpu(
     want: Backend,
@@ -1340,7 +1419,16 @@ fn build_stages(
                 {
                     eprintln!("warning: node '{name}': {w}");
                 }
-                let gpu_cloth = if choose_gpu(want, name, gpu)? {
+                let depth_only_cpu = !c.depth_colliders.is_empty();
+                if depth_only_cpu
+                    && (want == Backend::Gpu || (want == Backend::Auto && gpu.is_some()))
+                {
+                    eprintln!(
+                        "note: node '{name}' runs on the CPU: the GPU cloth reads distance-field \
+                         colliders only, and it has depth_colliders"
+                    );
+                }
+                let gpu_cloth = if !depth_only_cpu && choose_gpu(want, name, gpu)? {
                     match GpuCloth::new(gpu.expect("chosen"), &sim) {
                         Ok(g) => Some(Box::new(g.with_name(name.clone()))),
                         // Auto falls back to the CPU when the GPU cannot take this cloth (limits).
@@ -1359,6 +1447,18 @@ fn build_stages(
                     previous: Vec::new(),
                     gpu: gpu_cloth,
                     gpu_previous: Vec::new(),
+                    depth: c
+                        .depth_colliders
+                        .iter()
+                        .map(|d| DepthBody {
+                            body: d.body.clone(),
+                            params: d.params.clone(),
+                            eps: c.params.collision.epsilon,
+                            swept: rest_bounds.get(&d.body).copied(),
+                            camera: None,
+                            previous: None,
+                        })
+                        .collect(),
                 }
             }
             NodeSpec::Heightmap(h) => {

@@ -2,7 +2,7 @@
 
 use crate::diagnostics::{Source, ron_error};
 use crate::overrides::apply_override;
-use crate::schema::{GridChoice, HeightGrid, NodeSpec, PipelineFile, PortType};
+use crate::schema::{Backend, GridChoice, HeightGrid, NodeSpec, PipelineFile, PortType};
 use crate::{Error, Result};
 use petgraph::algo::{kosaraju_scc, toposort};
 use petgraph::graph::{DiGraph, NodeIndex};
@@ -388,6 +388,19 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             c.params
                 .validate()
                 .map_err(|e| fail("params", e.to_string()))?;
+            for d in &c.depth_colliders {
+                d.params
+                    .validate()
+                    .map_err(|e| fail("depth_colliders", e.to_string()))?;
+            }
+            if !c.depth_colliders.is_empty() && c.backend == Some(Backend::Gpu) {
+                return Err(fail(
+                    "backend",
+                    "the GPU cloth reads distance-field colliders only; a cloth with \
+                     depth_colliders runs on the CPU (set backend: Cpu, or leave it out)"
+                        .into(),
+                ));
+            }
         }
         NodeSpec::WriteHeightmap(w) => {
             if w.formats.is_empty() {

@@ -166,6 +166,11 @@ pub struct ClothNode {
     /// DistanceField nodes the cloth collides with, applied in this order each substep.
     #[serde(default)]
     pub colliders: Vec<String>,
+    /// Bodies the cloth collides with through depth maps (T's draping test every substep,
+    /// `imprint_stages::drape::collider`), applied after `colliders` each substep. A cloth
+    /// with depth colliders runs on the CPU.
+    #[serde(default)]
+    pub depth_colliders: Vec<DepthColliderNode>,
     /// Shape, material, pins, contact, substeps: `imprint_stages::cloth::ClothParams`.
     pub params: ClothParams,
     #[serde(default)]
@@ -173,6 +178,17 @@ pub struct ClothNode {
     /// `false` switches this node and everything that reads it off.
     #[serde(default = "yes")]
     pub enabled: bool,
+}
+
+/// A body read through depth maps by a cloth.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthColliderNode {
+    /// The Mesh node of the body (any closed mesh, possibly deforming).
+    pub body: String,
+    /// Views and map resolution: `imprint_stages::drape::DepthColliderParams`.
+    #[serde(default)]
+    pub params: imprint_stages::drape::DepthColliderParams,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -632,6 +648,11 @@ impl NodeSpec {
                 .colliders
                 .iter()
                 .map(|f| ("colliders", f.as_str(), PortType::DistanceField))
+                .chain(
+                    c.depth_colliders
+                        .iter()
+                        .map(|d| ("depth_colliders", d.body.as_str(), PortType::Mesh)),
+                )
                 .collect(),
             NodeSpec::Heightmap(h) => vec![("mesh", &h.mesh, PortType::Mesh)],
             NodeSpec::Ground(g) => g

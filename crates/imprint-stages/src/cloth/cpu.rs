@@ -19,6 +19,7 @@ use super::springs::{
 };
 use super::stability::{self, StabilityEstimate};
 use super::texture::AnisotropyMap;
+use crate::drape::DepthCollider;
 use glam::{Mat4, Vec3, Vec4};
 use imprint_core::{DistanceField, Error, Mesh, Result};
 use rayon::prelude::*;
@@ -127,6 +128,8 @@ struct Substep<'a> {
     pin_from: &'a [Vec3],
     pin_to: &'a [Vec3],
     colliders: &'a [Collider<'a>],
+    /// Bodies read through depth maps, applied after the fields.
+    depth: &'a [DepthCollider<'a>],
     /// Fraction of the frame at this substep's end (H §5.3's j/n).
     s: f32,
     dt: f32,
@@ -402,16 +405,20 @@ impl ClothSim {
                 span: (0.0, 1.0),
             })
             .collect();
-        self.step_frame_between(&bodies, frame, dt_frame)
+        self.step_frame_between(&bodies, &[], frame, dt_frame)
     }
 
     /// [`ClothSim::step_frame`] with each body given as two fields and the part of the time
     /// between them that this frame covers (a field node that builds every k frames and
     /// interpolates gives its two builds around the frame, and the frame's span of the
     /// blend). `start: None` reads `end` throughout; so does `blend_fields: false`.
+    ///
+    /// `depth` are bodies read through depth maps ([`crate::drape::collider`]), applied after
+    /// the fields each substep; their maps must be dilated by this cloth's ε.
     pub fn step_frame_between(
         &mut self,
         bodies: &[Body],
+        depth: &[DepthCollider],
         frame: u32,
         dt_frame: f32,
     ) -> Result<ClothFrameMetrics> {
@@ -433,6 +440,14 @@ impl ClothSim {
                 )));
             }
         }
+        let eps = self.params.collision.epsilon;
+        if let Some(d) = depth.iter().find(|d| d.eps() != eps) {
+            return Err(Error::Invalid(format!(
+                "cloth: a depth collider dilated by {} for a cloth with epsilon {eps}; build its \
+                 camera with the cloth's epsilon",
+                d.eps()
+            )));
+        }
         let nf = bodies.len();
         if nf != self.side_fields {
             self.side = vec![Vec4::ZERO; self.len() * nf.max(1)];
@@ -450,13 +465,14 @@ impl ClothSim {
                 span: b.span,
             })
             .collect();
-        self.run_frame(&colliders, frame, dt_frame)
+        self.run_frame(&colliders, depth, frame, dt_frame)
     }
 
     /// The substeps of one frame, against colliders ready to sample.
     fn run_frame(
         &mut self,
         colliders: &[Collider],
+        depth: &[DepthCollider],
         frame: u32,
         dt_frame: f32,
     ) -> Result<ClothFrameMetrics> {
@@ -487,7 +503,7 @@ impl ClothSim {
             } else {
                 (j + 1) as f32 / n_sub as f32
             };
-            let sub = self.substep(colliders, s, dt);
+            let sub = self.substep(colliders, depth, s, dt);
             if let Err(what) = self.check(&sub, ke_limit) {
                 self.state.pos.clone_from(&self.backup.pos);
                 self.state.prev.clone_from(&self.backup.prev);
@@ -507,7 +523,7 @@ impl ClothSim {
         for (k, to) in self.pin_to.iter().enumerate() {
             self.pin_from[k] = *to;
         }
-        Ok(self.metrics(frame, dt, colliders, &frame_stats, &last))
+        Ok(self.metrics(frame, dt, colliders, depth, &frame_stats, &last))
     }
 
     fn check(&self, sub: &SubstepStats, ke_limit: f64) -> std::result::Result<(), String> {
@@ -533,7 +549,13 @@ impl ClothSim {
     }
 
     /// One substep: every particle's next position, then the buffers rotate.
-    fn substep(&mut self, colliders: &[Collider], s: f32, dt: f32) -> SubstepStats {
+    fn substep(
+        &mut self,
+        colliders: &[Collider],
+        depth: &[DepthCollider],
+        s: f32,
+        dt: f32,
+    ) -> SubstepStats {
         let ratio = match self.dt_prev {
             Some(p) if p != dt => dt / p,
             _ => 1.0,
@@ -546,6 +568,7 @@ impl ClothSim {
             pin_from: &self.pin_from,
             pin_to: &self.pin_to,
             colliders,
+            depth,
             s,
             dt,
             ratio,
@@ -597,20 +620,20 @@ impl ClothSim {
     /// the potentials averaged over x and x_prev: the half-step pairing under which Verlet's
     /// energy error is second order, not first.
     pub fn energy(&self) -> Energy {
-        self.frame_pass(&[]).energy
+        self.frame_pass(&[], &[]).energy
     }
 
     /// One pass over the particles after a frame: energies, the largest strain, and the
     /// particles still closer than ε to a collider (or the ground). Partial sums per fixed
     /// chunk, then over chunks in order, so the result does not depend on the threads.
-    fn frame_pass(&self, colliders: &[Collider]) -> FramePass {
+    fn frame_pass(&self, colliders: &[Collider], depth: &[DepthCollider]) -> FramePass {
         let n = self.len();
         let parts: Vec<FramePass> = (0..n.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
                 let mut part = FramePass::default();
                 for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                    self.particle_pass(i, colliders, &mut part);
+                    self.particle_pass(i, colliders, depth, &mut part);
                 }
                 part
             })
@@ -625,7 +648,13 @@ impl ClothSim {
         total
     }
 
-    fn particle_pass(&self, i: usize, colliders: &[Collider], part: &mut FramePass) {
+    fn particle_pass(
+        &self,
+        i: usize,
+        colliders: &[Collider],
+        depth: &[DepthCollider],
+        part: &mut FramePass,
+    ) {
         let (pos, prev) = (&self.state.pos, &self.state.prev);
         let (u_pos, strain) = spring_energy(i, &self.links, pos);
         let (u_prev, _) = spring_energy(i, &self.links, prev);
@@ -662,6 +691,11 @@ impl ClothSim {
                 worst = worst.max(eps - s.distance);
             }
         }
+        for d in depth {
+            if let Some(s) = d.sample(x, 1.0) {
+                worst = worst.max(eps - s.distance);
+            }
+        }
         if let Some(h) = self.params.collision.ground {
             worst = worst.max(h + eps - x.y);
         }
@@ -693,10 +727,11 @@ impl ClothSim {
         frame: u32,
         dt: f32,
         colliders: &[Collider],
+        depth: &[DepthCollider],
         frame_stats: &SubstepStats,
         last: &SubstepStats,
     ) -> ClothFrameMetrics {
-        let pass = self.frame_pass(colliders);
+        let pass = self.frame_pass(colliders, depth);
         let total = pass.energy.total();
         let first = *self.first_energy.get_or_insert(total);
         ClothFrameMetrics {
@@ -765,7 +800,7 @@ impl ClothSim {
             band_misses: gpu.band_misses,
             ..SubstepStats::new()
         };
-        Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &stats, &stats))
+        Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &[], &stats, &stats))
     }
 
     /// The cloth as a mesh (the garment's own vertex layout and UVs, or the grid's), with
@@ -848,6 +883,27 @@ fn update_chunk(
             if let Some(hit) = hit {
                 record(st, hit);
                 st.band_misses += sample.band_miss as u32;
+            }
+            *out = x.extend(out.w);
+        }
+    }
+    for collider in ctx.depth {
+        for (k, out) in next.iter_mut().enumerate() {
+            let i = base + k;
+            if pinned(i) {
+                continue;
+            }
+            let mut x = out.truncate();
+            let Some(sample) = collider.sample(x, ctx.s) else {
+                continue;
+            };
+            // Depth maps carry the side themselves: no memory to keep.
+            let mut side = glam::Vec4::ZERO;
+            let from = pos[i].truncate();
+            if let Some(hit) =
+                contact::respond(&mut x, from, &sample, &mut side, ctx.eps, ctx.friction)
+            {
+                record(st, hit);
             }
             *out = x.extend(out.w);
         }

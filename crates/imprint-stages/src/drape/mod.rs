@@ -2,8 +2,8 @@
 //!
 //! **Inputs.** A body (any triangle mesh, possibly deforming: each call renders it afresh)
 //! and a garment: any set of points (a mesh's positions, a cloth's particles), moved in place.
-//! One call is a one-shot fit ([`drape_cpu`]); called once per substep it is a collider for
-//! the cloth (not wired yet).
+//! One call is a one-shot fit ([`drape_cpu`]); the same maps, dilated by the cloth's ε and
+//! read every substep, are a collider for the cloth ([`collider`]).
 //!
 //! **T's method.** For each view direction d (T: top, front, back; orthographic) render the
 //! body's depth seen along d (its front surface) and seen along −d (its back surface). A
@@ -64,10 +64,12 @@
 //! **Determinism.** Every vertex is decided on its own from the maps and the mesh; counts and
 //! the maximum are gathered in vertex order: the result is the same on any thread count.
 
+pub mod collider;
 pub mod cpu;
 pub mod inside;
 pub mod params;
 
+pub use collider::{DepthCamera, DepthCollider, DepthColliderParams, DepthPose};
 pub use cpu::{DrapeReport, Push, body_field, drape_cpu, drape_with};
 pub use inside::InsideTest;
 pub use params::{DrapeParams, Fallback};

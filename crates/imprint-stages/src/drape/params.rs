@@ -78,26 +78,8 @@ impl DrapeParams {
 
     /// Checks every number before anything is allocated; errors name the field.
     pub fn validate(&self) -> Result<()> {
-        if self.views.is_empty() || self.views.len() > MAX_VIEWS {
-            return Err(invalid(format!(
-                "views: {} given, must be between 1 and {MAX_VIEWS} directions",
-                self.views.len()
-            )));
-        }
-        for (i, v) in self.views.iter().enumerate() {
-            if !v.is_finite() || v.length_squared() < 1e-12 {
-                return Err(invalid(format!(
-                    "views[{i}] = {v}: must be a finite, non-zero vector (the way the view looks)"
-                )));
-            }
-        }
-        let max = imprint_core::raster::MAX_SIZE;
-        if !(MIN_RESOLUTION..=max).contains(&self.resolution) {
-            return Err(invalid(format!(
-                "resolution = {}: must be between {MIN_RESOLUTION} and {max} pixels",
-                self.resolution
-            )));
-        }
+        validate_views(&self.views, "drape")?;
+        validate_resolution(self.resolution, "drape")?;
         if !(self.offset.is_finite() && self.offset >= 0.0) {
             return Err(invalid(format!(
                 "offset = {}: must be a finite number >= 0 (m)",
@@ -124,6 +106,35 @@ impl DrapeParams {
 
 fn invalid(message: String) -> Error {
     Error::Invalid(format!("drape: {message}"))
+}
+
+/// Checks a list of view directions (`what` names the stage in the message).
+pub(crate) fn validate_views(views: &[Vec3], what: &str) -> Result<()> {
+    if views.is_empty() || views.len() > MAX_VIEWS {
+        return Err(Error::Invalid(format!(
+            "{what}: views: {} given, must be between 1 and {MAX_VIEWS} directions",
+            views.len()
+        )));
+    }
+    for (i, v) in views.iter().enumerate() {
+        if !v.is_finite() || v.length_squared() < 1e-12 {
+            return Err(Error::Invalid(format!(
+                "{what}: views[{i}] = {v}: must be a finite, non-zero vector (the way the view looks)"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Checks a depth map side (`what` names the stage in the message).
+pub(crate) fn validate_resolution(resolution: u32, what: &str) -> Result<()> {
+    let max = imprint_core::raster::MAX_SIZE;
+    if !(MIN_RESOLUTION..=max).contains(&resolution) {
+        return Err(Error::Invalid(format!(
+            "{what}: resolution = {resolution}: must be between {MIN_RESOLUTION} and {max} pixels"
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

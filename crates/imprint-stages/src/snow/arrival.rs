@@ -196,13 +196,17 @@ pub(crate) struct Lookup {
 
 impl Lookup {
     pub(crate) fn new(map: &DepthMap) -> Self {
-        let half_height = map.camera.half_height_scale();
-        let k = map.height as f32 / (2.0 * half_height);
+        Self::for_camera(&map.camera, map.height)
+    }
+
+    /// The projection of a square `res`² map rendered with `camera`.
+    pub(crate) fn for_camera(camera: &Camera, res: u32) -> Self {
+        let k = res as f32 / (2.0 * camera.half_height_scale());
         Lookup {
-            frame: map.camera.frame(),
+            frame: camera.frame(),
             k,
-            centre: 0.5 * map.height as f32,
-            res: map.height,
+            centre: 0.5 * res as f32,
+            res,
             texel: 1.0 / k,
         }
     }

@@ -1,0 +1,540 @@
+//! The depth-map collider for the cloth: T's draping test applied every substep, beside the
+//! distance-field collider of [`crate::cloth::contact`].
+//!
+//! **What the cloth sees.** Per view direction d, two orthographic depth maps of the body
+//! (looking along d and against it), rendered once per body pose with fixed cameras
+//! ([`DepthCamera`]), and *dilated by the cloth's ε*: each map holds the first surface of the
+//! body's ε-offset as seen from its side (the Minkowski sum of the map's surface points with a
+//! ball of radius ε, over the texels within ε). Along one view a point is inside the offset
+//! body when it lies behind both maps' surfaces; its signed distance along that view is
+//! `max(−e_front, −e_back)`, where `e` is how far the point lies behind each surface.
+//! Uncovered texels (past the dilated silhouette) are outside.
+//!
+//! **Which views decide.** Over the views the body is the intersection of the views' slabs
+//! (a point a view sees in front of the body is outside), and a point inside moves along the
+//! axis of the view with the largest (least negative) distance, to that surface: T's
+//! shortest push. But near a view's silhouette its maps are unreliable: the surface turns
+//! away, its depth changes by many texels across one, and coverage is decided at texel
+//! centres, so a point inside the body can read as outside there (a cloth resting on a
+//! sphere fell in at the views' silhouettes and was thrown out a substep later, which kept
+//! it jittering). So only *steady* views vote: where the 2×2 texels around the point are all
+//! covered with depths within [`STEEP`] texels of each other, or all uncovered. Three
+//! orthogonal views always leave one steady view near a smooth surface (its normal is within
+//! 55° of some axis). Where no view is steady, all views vote.
+//!
+//! **Exactness.** For a convex body each view alone is exact along its axis, so the
+//! intersection is the body itself (up to the texel sampling); for a body with layers along
+//! every view (a gap no view sees into) it is larger than the body, and the cloth is held off
+//! the gap: T's failure, seen from the cloth's side. The push is along a view axis, not the
+//! normal, so near a view's silhouette the particle slides along the axis; the friction of
+//! [`crate::cloth::contact::respond`] is applied as for the field collider.
+//!
+//! **Sampling.** A point reads the bilinear blend of the 2×2 texels around its projection
+//! when all four are covered, else the nearest covered of them (the smallest depth: the
+//! outermost surface) provided the texel it falls in is covered.
+//!
+//! **Time.** A substep s of the way through the frame blends the two poses' maps per texel,
+//! as the field collider blends its two fields: covered in both, linearly in s (exact for
+//! motion along the view); covered in one, that one throughout the frame. Where the body
+//! moves across a view, the linear blend is not the body in between: a silhouette swept
+//! across a texel in the frame would appear only at one end, so the union keeps it (a point
+//! the moving body covers is not called outside by that view, which would end the
+//! intersection's test early).
+//!
+//! **Cost.** Per pose: two renders per distinct view line (d and −d give the same pair of
+//! maps, so T's top/front/back renders four maps), then the dilation, O(texels · (ε/texel)²).
+//! Per particle and substep: two projections and up to 16 texel reads per view line.
+
+use super::params::{validate_resolution, validate_views};
+use crate::cloth::contact::Signed;
+use crate::snow::arrival::{Lookup, snow_camera};
+use glam::Vec3;
+use imprint_core::raster::{DepthMap, RasterOptions};
+use imprint_core::{Aabb, Camera, Mesh, Result};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// A body the cloth collides with through depth maps, as a pipeline file states it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DepthColliderParams {
+    /// The directions the views look along (as [`super::DrapeParams::views`]); a direction
+    /// and its opposite give the same view. Default T's top, front and back.
+    pub views: Vec<Vec3>,
+    /// Side of the square depth maps, pixels. Default 256.
+    pub resolution: u32,
+}
+
+impl Default for DepthColliderParams {
+    fn default() -> Self {
+        DepthColliderParams {
+            views: super::DrapeParams::default().views,
+            resolution: 256,
+        }
+    }
+}
+
+impl DepthColliderParams {
+    /// Checks every number; errors name the field.
+    pub fn validate(&self) -> Result<()> {
+        validate_views(&self.views, "depth collider")?;
+        validate_resolution(self.resolution, "depth collider")
+    }
+}
+
+/// The fixed cameras of a depth collider: one pair of maps per distinct view line, over a box
+/// the body stays inside.
+pub struct DepthCamera {
+    views: Vec<CameraPair>,
+    resolution: u32,
+    eps: f32,
+    /// The box the cameras see whole (the body's box grown by ε and a margin).
+    bounds: Aabb,
+    texel: f32,
+}
+
+struct CameraPair {
+    dir: Vec3,
+    front: (Camera, Lookup),
+    back: (Camera, Lookup),
+}
+
+/// One body pose as the collider reads it: per view line, the front and back maps of the
+/// body's ε-offset (`f32::INFINITY` where uncovered).
+#[derive(Clone, Debug)]
+pub struct DepthPose {
+    maps: Vec<[Vec<f32>; 2]>,
+}
+
+/// The distinct lines of a list of directions, in order: a direction whose opposite (or
+/// itself) came earlier is dropped.
+pub fn distinct_lines(dirs: &[Vec3]) -> Vec<Vec3> {
+    let mut out: Vec<Vec3> = Vec::new();
+    for &d in dirs {
+        let d = d.normalize();
+        if !out.iter().any(|o| o.dot(d).abs() > 1.0 - 1e-6) {
+            out.push(d);
+        }
+    }
+    out
+}
+
+impl DepthCamera {
+    /// Cameras that see `bounds` (the body's box over the frames it is used for) grown by
+    /// `eps` (the cloth's contact distance, which the maps are dilated by) and a few texels.
+    pub fn new(bounds: &Aabb, params: &DepthColliderParams, eps: f32) -> Result<Self> {
+        params.validate()?;
+        if !(eps.is_finite() && eps >= 0.0) {
+            return Err(imprint_core::Error::Invalid(format!(
+                "depth collider: epsilon = {eps} must be a finite number >= 0"
+            )));
+        }
+        if bounds.is_empty() {
+            return Err(imprint_core::Error::Invalid(
+                "depth collider: the body has no triangles to render".into(),
+            ));
+        }
+        let res = params.resolution;
+        let grow = eps + 4.0 * bounds.size().max_element() / res as f32;
+        let bounds = Aabb {
+            min: bounds.min - Vec3::splat(grow),
+            max: bounds.max + Vec3::splat(grow),
+        };
+        let mut views = Vec::new();
+        let mut texel = 0f32;
+        for dir in distinct_lines(&params.views) {
+            let side = |d: Vec3| -> Result<(Camera, Lookup)> {
+                let cam = snow_camera(&bounds, d, res)?;
+                let look = Lookup::for_camera(&cam, res);
+                Ok((cam, look))
+            };
+            let (front, back) = (side(dir)?, side(-dir)?);
+            texel = texel.max(front.1.texel).max(back.1.texel);
+            views.push(CameraPair { dir, front, back });
+        }
+        Ok(DepthCamera {
+            views,
+            resolution: res,
+            eps,
+            bounds,
+            texel,
+        })
+    }
+
+    /// Whether `b` lies inside the box the cameras see (else the maps would clip the body).
+    pub fn sees(&self, b: &Aabb) -> bool {
+        b.is_empty() || (b.min.cmpge(self.bounds.min).all() && b.max.cmple(self.bounds.max).all())
+    }
+
+    /// The largest texel of the maps, m.
+    pub fn texel(&self) -> f32 {
+        self.texel
+    }
+
+    /// The distinct view lines (unit).
+    pub fn lines(&self) -> Vec<Vec3> {
+        self.views.iter().map(|v| v.dir).collect()
+    }
+
+    /// Renders the body with `rasterize` (the CPU's `imprint_core::raster::rasterize_depth_with`
+    /// or a closure over the GPU's) and dilates the maps by ε.
+    pub fn pose(
+        &self,
+        body: &Mesh,
+        mut rasterize: impl FnMut(&Mesh, &Camera, u32, u32, &RasterOptions) -> Result<DepthMap>,
+    ) -> Result<DepthPose> {
+        let res = self.resolution;
+        let mut maps = Vec::with_capacity(self.views.len());
+        for v in &self.views {
+            let mut one = |(cam, look): &(Camera, Lookup)| -> Result<Vec<f32>> {
+                let m = rasterize(body, cam, res, res, &RasterOptions::default())?;
+                let depth: Vec<f32> = m
+                    .depth
+                    .iter()
+                    .zip(&m.coverage)
+                    .map(|(&d, &c)| if c { d } else { f32::INFINITY })
+                    .collect();
+                Ok(dilate(&depth, res as usize, look.texel, self.eps))
+            };
+            maps.push([one(&v.front)?, one(&v.back)?]);
+        }
+        Ok(DepthPose { maps })
+    }
+
+    /// The collider between two poses over a frame (`start: None` reads `end` throughout).
+    pub fn collider<'a>(
+        &'a self,
+        start: Option<&'a DepthPose>,
+        end: &'a DepthPose,
+    ) -> DepthCollider<'a> {
+        DepthCollider {
+            camera: self,
+            start,
+            end,
+        }
+    }
+}
+
+/// The body's ε-offset seen from the same side: each texel takes the nearest of the ε-balls
+/// around the covered texels' surface points within ε (their depth minus the ball's height
+/// over the texel). ε = 0 leaves the map as it is.
+fn dilate(depth: &[f32], res: usize, texel: f32, eps: f32) -> Vec<f32> {
+    let reach = (eps / texel).floor() as i64;
+    if reach < 1 {
+        return depth.to_vec();
+    }
+    // (di, dj, ball height) for every texel offset within ε.
+    let mut ball = Vec::new();
+    for dj in -reach..=reach {
+        for di in -reach..=reach {
+            let r2 = (di * di + dj * dj) as f32 * texel * texel;
+            if r2 <= eps * eps {
+                ball.push((di, dj, (eps * eps - r2).sqrt()));
+            }
+        }
+    }
+    let n = res as i64;
+    let mut out = vec![f32::INFINITY; depth.len()];
+    out.par_chunks_mut(res).enumerate().for_each(|(j, row)| {
+        let j = j as i64;
+        for (i, o) in row.iter_mut().enumerate() {
+            let i = i as i64;
+            let mut best = f32::INFINITY;
+            for &(di, dj, h) in &ball {
+                let (a, b) = (i + di, j + dj);
+                if a >= 0 && b >= 0 && a < n && b < n {
+                    best = best.min(depth[(b * n + a) as usize] - h);
+                }
+            }
+            *o = best;
+        }
+    });
+    out
+}
+
+/// A body as the cloth reads it in one frame: fixed cameras and the poses at the frame's two
+/// ends.
+#[derive(Clone, Copy)]
+pub struct DepthCollider<'a> {
+    camera: &'a DepthCamera,
+    start: Option<&'a DepthPose>,
+    end: &'a DepthPose,
+}
+
+impl DepthCollider<'_> {
+    /// The ε the maps are dilated by.
+    pub fn eps(&self) -> f32 {
+        self.camera.eps
+    }
+
+    /// The body at `x`, `s` of the way through the frame: the signed distance to the body
+    /// (ε added back to the offset's) and the outward push direction, or `None` where `x` is
+    /// outside (see the module doc for which views decide).
+    #[inline]
+    pub fn sample(&self, x: Vec3, s: f32) -> Option<Signed> {
+        let res = self.camera.resolution as usize;
+        // Among the steady views, the one facing the surface best (smallest spread); among
+        // all views, the largest distance. (distance, push direction, spread)
+        let mut steady: Option<(f32, Vec3, f32)> = None;
+        let mut any: Option<(f32, Vec3, f32)> = None;
+        let mut any_out = false;
+        for (k, v) in self.camera.views.iter().enumerate() {
+            let read = |side: usize, look: &Lookup| -> Read {
+                let (px, py, z) = look.project(x);
+                let r = surface_at(
+                    self.start.map(|p| p.maps[k][side].as_slice()),
+                    &self.end.maps[k][side],
+                    res,
+                    px,
+                    py,
+                    s,
+                    STEEP * look.texel,
+                );
+                Read {
+                    behind: r.depth.map(|d| z - d),
+                    steady: r.steady,
+                    spread: r.spread,
+                }
+            };
+            let (f, b) = (read(0, &v.front.1), read(1, &v.back.1));
+            let view_steady = f.steady && b.steady;
+            let (Some(ef), Some(eb)) = (f.behind, b.behind) else {
+                // Uncovered: this view sees x outside.
+                if view_steady {
+                    return None;
+                }
+                any_out = true;
+                continue;
+            };
+            let (d, out, spread) = if -ef >= -eb {
+                (-ef, -v.dir, f.spread)
+            } else {
+                (-eb, v.dir, b.spread)
+            };
+            if d >= 0.0 {
+                if view_steady {
+                    return None;
+                }
+                any_out = true;
+                continue;
+            }
+            if view_steady && steady.is_none_or(|(_, _, b)| spread < b) {
+                steady = Some((d, out, spread));
+            }
+            if any.is_none_or(|(b, _, _)| d > b) {
+                any = Some((d, out, spread));
+            }
+        }
+        let (d, outward, _) = match (steady, any_out) {
+            (Some(best), _) => best,
+            (None, false) => any?,
+            (None, true) => return None,
+        };
+        Some(Signed {
+            distance: d + self.camera.eps,
+            outward,
+            band_miss: false,
+        })
+    }
+}
+
+/// A view's depth is trusted where the 2×2 texels around the point are all covered and
+/// differ by at most this many texels (the surface turned less than about 65° from the
+/// view), or all uncovered: away from its silhouettes.
+const STEEP: f32 = 1.5;
+
+/// One map read at a point: how far the point lies behind the surface (`None`: uncovered)
+/// and whether the map is steady there.
+struct Read {
+    behind: Option<f32>,
+    steady: bool,
+    spread: f32,
+}
+
+/// A map's surface at a point: its depth (`None` where the texel the point falls in is
+/// uncovered) and whether the map is steady there (see [`STEEP`]).
+struct Surface {
+    depth: Option<f32>,
+    steady: bool,
+    /// The depth spread over the 2×2, m (infinite unless all four are covered).
+    spread: f32,
+}
+
+/// The map's surface depth at pixel coordinates (px, py), blended between the poses at `s`
+/// (see the module doc): bilinear over the 2×2 texel centres around the point when all are
+/// covered, else the nearest covered depth among them when the point's own texel is covered.
+/// `steep` is the largest depth spread over the 2×2 at which the map is steady, m.
+#[inline]
+fn surface_at(
+    start: Option<&[f32]>,
+    end: &[f32],
+    res: usize,
+    px: f32,
+    py: f32,
+    s: f32,
+    steep: f32,
+) -> Surface {
+    let at = |k: usize| -> f32 {
+        let b = end[k];
+        match start {
+            Some(a) if s < 1.0 => {
+                let a = a[k];
+                match (a.is_finite(), b.is_finite()) {
+                    (true, true) => a + (b - a) * s,
+                    (true, false) => a,
+                    (false, true) => b,
+                    _ => f32::INFINITY,
+                }
+            }
+            _ => b,
+        }
+    };
+    let last = res as f32;
+    if !(px >= 0.0 && py >= 0.0 && px < last && py < last) {
+        return Surface {
+            depth: None,
+            steady: true,
+            spread: f32::INFINITY,
+        };
+    }
+    let own = at(py as usize * res + px as usize);
+    // The 2×2 texel centres around the point.
+    let (fx, fy) = (px - 0.5, py - 0.5);
+    let (i0, j0) = (fx.floor(), fy.floor());
+    let (tx, ty) = (fx - i0, fy - j0);
+    let clamp = |v: f32| (v.max(0.0) as usize).min(res - 1);
+    let (i0, i1) = (clamp(i0), clamp(i0 + 1.0));
+    let (j0, j1) = (clamp(j0), clamp(j0 + 1.0));
+    let q = [
+        at(j0 * res + i0),
+        at(j0 * res + i1),
+        at(j1 * res + i0),
+        at(j1 * res + i1),
+    ];
+    let covered = q.iter().filter(|d| d.is_finite()).count();
+    if covered == 4 {
+        let (lo, hi) = q
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &d| {
+                (a.min(d), b.max(d))
+            });
+        let top = q[0] + (q[1] - q[0]) * tx;
+        let bottom = q[2] + (q[3] - q[2]) * tx;
+        return Surface {
+            depth: Some(top + (bottom - top) * ty),
+            steady: hi - lo <= steep,
+            spread: hi - lo,
+        };
+    }
+    Surface {
+        depth: own
+            .is_finite()
+            .then(|| q.iter().copied().fold(own, f32::min)),
+        steady: covered == 0,
+        spread: f32::INFINITY,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imprint_core::mesh::primitives::uv_sphere;
+    use imprint_core::raster::rasterize_depth_with;
+
+    fn sphere_collider(r: f32, eps: f32, res: u32) -> (DepthCamera, DepthPose) {
+        let body = uv_sphere(r, 192, 96);
+        let params = DepthColliderParams {
+            views: vec![Vec3::NEG_Y, Vec3::NEG_Z, Vec3::X],
+            resolution: res,
+        };
+        let cam = DepthCamera::new(&body.bounds(), &params, eps).unwrap();
+        let pose = cam.pose(&body, rasterize_depth_with).unwrap();
+        (cam, pose)
+    }
+
+    #[test]
+    fn opposite_directions_are_one_line() {
+        let l = distinct_lines(&[Vec3::NEG_Y, Vec3::NEG_Z, Vec3::Z, Vec3::Y * 2.0, Vec3::X]);
+        assert_eq!(l, vec![Vec3::NEG_Y, Vec3::NEG_Z, Vec3::X]);
+    }
+
+    /// On a sphere (convex: each view exact along its axis) the collider's signed distance
+    /// near the surface is the exact one along the binding axis, within the sampling.
+    #[test]
+    fn sphere_distances_match_the_exact_ones_near_the_surface() {
+        let (r, eps) = (0.5, 0.02);
+        let (cam, pose) = sphere_collider(r, eps, 256);
+        let c = cam.collider(None, &pose);
+        let texel = cam.texel();
+        // Straight above the pole, at heights from inside to within ε.
+        for h in [-0.05f32, -0.01, 0.0, 0.01] {
+            let s = c.sample(Vec3::new(0.0, r + h, 0.0), 1.0).unwrap();
+            // The tessellated pole is a vertex at r exactly.
+            assert!(
+                (s.distance - h).abs() < 0.5 * texel,
+                "h {h}: {} (texel {texel})",
+                s.distance
+            );
+            assert_eq!(s.outward, Vec3::Y);
+        }
+        // Beyond ε above the pole: outside the offset in the side views (uncovered).
+        assert!(
+            c.sample(Vec3::new(0.0, r + eps + 2.0 * texel, 0.0), 1.0)
+                .is_none()
+        );
+        // Inside along a diagonal: the axis with the shortest way out of the ε-offset sphere
+        // (radius r + ε) pushes; the distance reported is that way's length less ε.
+        let p = Vec3::new(0.3, 0.3, 0.1);
+        let s = c.sample(p, 1.0).unwrap();
+        let out = |a: f32, b: f32, c: f32| ((r + eps).powi(2) - b * b - c * c).sqrt() - a;
+        let shortest = out(p.x, p.y, p.z)
+            .min(out(p.y, p.x, p.z))
+            .min(out(p.z, p.x, p.y));
+        assert!(
+            (s.distance - (eps - shortest)).abs() < texel,
+            "{} vs {}",
+            s.distance,
+            eps - shortest
+        );
+    }
+
+    /// Blending two poses: a sphere moved up by 0.1 between them is met half-way at s = 0.5.
+    #[test]
+    fn blends_poses_in_time() {
+        let (r, eps) = (0.4, 0.0);
+        let a = uv_sphere(r, 96, 48);
+        let mut b = a.clone();
+        b.transform(glam::Mat4::from_translation(Vec3::Y * 0.1));
+        let mut bounds = a.bounds();
+        bounds = bounds.union(&b.bounds());
+        let params = DepthColliderParams {
+            views: vec![Vec3::NEG_Y],
+            resolution: 128,
+        };
+        let cam = DepthCamera::new(&bounds, &params, eps).unwrap();
+        let (pa, pb) = (
+            cam.pose(&a, rasterize_depth_with).unwrap(),
+            cam.pose(&b, rasterize_depth_with).unwrap(),
+        );
+        let c = cam.collider(Some(&pa), &pb);
+        let top = Vec3::new(0.0, r + 0.2, 0.0);
+        for (s, expect) in [(0.0, 0.2), (0.5, 0.15), (1.0, 0.1)] {
+            let d = c.sample(top, s).unwrap().distance;
+            assert!((d - expect).abs() < 1e-3, "s {s}: {d} vs {expect}");
+        }
+    }
+
+    #[test]
+    fn dilation_is_the_offset_of_a_plane_and_grows_coverage() {
+        // A flat map at depth 1 over the left half: dilated by ε = 3 texels.
+        let res = 16;
+        let depth: Vec<f32> = (0..res * res)
+            .map(|k| if k % res < 8 { 1.0 } else { f32::INFINITY })
+            .collect();
+        let d = dilate(&depth, res, 1.0, 3.0);
+        assert_eq!(d[5 * res + 3], 1.0 - 3.0);
+        // Two texels past the edge: the ball around the edge texel, sqrt(9 - 4) lower.
+        assert!((d[5 * res + 9] - (1.0 - 5f32.sqrt())).abs() < 1e-6);
+        assert!(d[5 * res + 10].is_finite() && d[5 * res + 11].is_infinite());
+    }
+}
