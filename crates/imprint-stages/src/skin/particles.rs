@@ -6,8 +6,8 @@
 //! - (a) a spring to each neighbour. T ([`Spring::Distance`]): toward the rest distance,
 //!   `k_s μ_ij (d − L_ij) / m_i` along the pair, μ_ij the reduced mass. Ours, the default
 //!   ([`Spring::Corotated`]): toward the rest offset turned by the pair's rotation,
-//!   `k_s μ_ij (x_j − x_i − R_ij (X_j − X_i)) / m_i`, R_ij the normalised mean of the two
-//!   particles' rotations (each the rotation part of Σ_j (x_j − x_i)(X_j − X_i)ᵀ over its
+//!   `k_s μ_ij (x_j − x_i − R_ij (X_j − X_i)) / m_i`, R_ij = ½(R_i + R_j) the mean of the two
+//!   particles' rotation matrices (each the rotation part of Σ_j (x_j − x_i)(X_j − X_i)ᵀ over its
 //!   neighbours, tracked from substep to substep by one round of Müller et al.'s iteration);
 //! - (b) damping of the relative velocity along the pair: `c_s μ_ij ((v_j − v_i)·n) / m_i`;
 //! - (c) toward the position its bone's skinning transform gives its rest position:
@@ -290,9 +290,11 @@ pub struct ParticleSkin {
     /// Each particle's rotation, tracked every substep with [`Spring::Corotated`].
     rot: Vec<Quat>,
     rot_new: Vec<Quat>,
-    /// Per particle: (Σ_j (X_j − X_i)(X_j − X_i)ᵀ)⁻¹ (None when its neighbours span no
+    /// Half each particle's rotation matrix, for the pairs' mean rotation.
+    half_rot: Vec<Mat3>,
+    /// Per particle: det Σ_j (X_j − X_i)(X_j − X_i)ᵀ (None when its neighbours span no
     /// volume), and the current volume change J.
-    rest_inv: Vec<Option<Mat3>>,
+    rest_inv: Vec<Option<f32>>,
     jac: Vec<f32>,
     bones: usize,
     deviation_limit: f32,
@@ -371,7 +373,7 @@ impl ParticleSkin {
             .flat_map(|i| (start[i]..start[i + 1]).map(move |e| (i, e as usize)))
             .map(|(i, e)| positions[nbr[e] as usize] - positions[i])
             .collect();
-        let rest_inv: Vec<Option<Mat3>> = (0..n)
+        let rest_inv: Vec<Option<f32>> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let b = neighbourhood(
@@ -381,7 +383,8 @@ impl ParticleSkin {
                     i,
                 );
                 let scale = b.x_axis.length() + b.y_axis.length() + b.z_axis.length();
-                (b.determinant().abs() > 1e-6 * scale.powi(3)).then(|| b.inverse())
+                let det = b.determinant();
+                (det.abs() > 1e-6 * scale.powi(3)).then_some(det)
             })
             .collect();
         Ok(ParticleSkin {
@@ -406,6 +409,7 @@ impl ParticleSkin {
             bone_rot: vec![Quat::IDENTITY; bones.len()],
             rot: vec![Quat::IDENTITY; n],
             rot_new: vec![Quat::IDENTITY; n],
+            half_rot: vec![Mat3::IDENTITY * 0.5; n],
             rest_inv,
             jac: vec![1.0; n],
             bones: bones.len(),
@@ -481,17 +485,20 @@ impl ParticleSkin {
                 self.rot_new
                     .par_chunks_mut(CHUNK)
                     .zip(self.jac.par_chunks_mut(CHUNK))
+                    .zip(self.half_rot.par_chunks_mut(CHUNK))
                     .enumerate()
-                    .for_each(|(c, (out, jac))| {
+                    .for_each(|(c, ((out, jac), hr))| {
                         for k in 0..out.len() {
                             let i = c * CHUNK + k;
                             let a =
                                 neighbourhood(x, rest, &nb[st[i] as usize..st[i + 1] as usize], i);
                             if corotated {
                                 out[k] = extract_rotation(&a, rot[i], 1);
+                                hr[k] = Mat3::from_quat(out[k]) * 0.5;
                             }
+                            // det(A B⁻¹) as det A / det B: exactly 1 at rest.
                             jac[k] = match binv[i] {
-                                Some(b) => (a * b).determinant(),
+                                Some(b) => a.determinant() / b,
                                 None => 1.0,
                             };
                         }
@@ -502,7 +509,7 @@ impl ParticleSkin {
             }
             // Pass 1: accelerations from x_n and the estimated v_n.
             {
-                let (rot, jac) = (&self.rot, &self.jac);
+                let (hrot, jac) = (&self.half_rot, &self.jac);
                 let (x, ve, rest, bone) = (&self.x, &self.ve, &self.rest, &self.bone);
                 let (st, nb, rl, wt, ro) = (
                     &self.start,
@@ -520,31 +527,38 @@ impl ParticleSkin {
                             let xi = x[i];
                             let vi = ve[i];
                             let mut acc = Vec3::ZERO;
-                            for e in st[i] as usize..st[i + 1] as usize {
-                                let j = nb[e] as usize;
-                                let dx = x[j] - xi;
-                                let d = dx.length();
-                                if d <= 0.0 {
-                                    continue;
-                                }
-                                let n = dx / d;
-                                let vj = ve[j];
-                                if kv > 0.0 {
-                                    // Pressure: apart when the pair's neighbourhoods shrank.
-                                    acc += (wt[e] * kv * (0.5 * (jac[i] + jac[j]) - 1.0)) * dx;
-                                }
-                                if corotated {
-                                    let (qi, mut qj) = (rot[i], rot[j]);
-                                    if qi.dot(qj) < 0.0 {
-                                        qj = -qj;
+                            let edges = st[i] as usize..st[i + 1] as usize;
+                            // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
+                            let pi = 0.5 * kv * jac[i] - kv;
+                            if corotated {
+                                let hri = hrot[i];
+                                for e in edges {
+                                    let j = nb[e] as usize;
+                                    let dx = x[j] - xi;
+                                    let d2 = dx.length_squared();
+                                    if d2 <= 0.0 {
+                                        continue;
                                     }
-                                    let r = (qi + qj).normalize();
-                                    let off = r * ro[e];
-                                    let f = ks * (dx - off) + (cs * (vj - vi).dot(n)) * n;
+                                    let n = dx * d2.sqrt().recip();
+                                    // ½(R_i + R_j) (X_j − X_i).
+                                    let off = (hri + hrot[j]) * ro[e];
+                                    let p = pi + 0.5 * kv * jac[j];
+                                    let f =
+                                        ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(n)) * n;
                                     acc += wt[e] * f;
-                                } else {
-                                    let f = ks * (d - rl[e]) + cs * (vj - vi).dot(n);
-                                    acc += (wt[e] * f) * n;
+                                }
+                            } else {
+                                for e in edges {
+                                    let j = nb[e] as usize;
+                                    let dx = x[j] - xi;
+                                    let d = dx.length();
+                                    if d <= 0.0 {
+                                        continue;
+                                    }
+                                    let n = dx / d;
+                                    let p = pi + 0.5 * kv * jac[j];
+                                    let f = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(n);
+                                    acc += wt[e] * (f * n + p * dx);
                                 }
                             }
                             let target = tf[bone[i] as usize].transform_point3(rest[i]);
