@@ -24,7 +24,12 @@
 //!   cube, so axis-aligned faces (a box's) do not pass through rows of centres.
 //! - *Volume.* Each particle owns its lattice Voronoi cell, `a_k³/4`; the particle volume is
 //!   the sum. Whole cubes own their exact volume, so the only error is the finest level's
-//!   centre-inside rule at the surface (a midpoint rule): within 1–2% at a few cells across.
+//!   centre-inside rule at the surface (a midpoint rule). Measured at finest radius 0.01:
+//!   +0.33% on a torus (tube radius 0.1), +0.13% on the cow (1 m long), +0.08% on a sphere
+//!   of radius 0.3.
+//! - *Counts* at finest radius 0.01 with 3 levels: sphere r 0.3, 8924 adaptive vs 19928
+//!   uniform; torus 7675 vs 10419; cow 5887 vs 8323. A plate thinner than a coarse cube's
+//!   diagonal gains nothing (T's remark): every cube there is split to the finest level.
 //! - *Uniform count* (for the report) is the count a fill at the finest radius everywhere
 //!   would give, obtained without building it: a whole level-k cube holds `4 · 8^(L−1−k)`
 //!   finest particles, all inside.
@@ -33,8 +38,8 @@
 //! visited cubes are the kept ones plus those along the surface, O(area / finest cell²).
 //!
 //! **Determinism.** Root cubes are visited in z, y, x order and children in a fixed order;
-//! the particle list is the same on every run and thread count (the tests run in parallel
-//! over root cubes and concatenate in order).
+//! the particle list is the same on every run and thread count (root cubes are tested in
+//! parallel and their particles concatenated in root order).
 
 use crate::drape::InsideTest;
 use glam::Vec3;
