@@ -84,7 +84,7 @@
 //! index: bytes are the same on any thread count.
 
 use super::fill::{Fill, FillParams, FillReport, fill};
-use glam::{Affine3A, Mat3, Quat, Vec3};
+use glam::{Affine3A, Mat3A, Quat, Vec3, Vec3A};
 use imprint_core::{Error, Mesh, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -268,19 +268,22 @@ pub struct ParticleSkin {
     rest: Vec<Vec3>,
     radii: Vec<f32>,
     bone: Vec<u32>,
+    /// Positions as of the last frame's end (what [`ParticleSkin::positions`] gives).
     x: Vec<Vec3>,
+    /// Positions, SIMD-friendly, as the substeps move them.
+    xa: Vec<Vec3A>,
     /// Velocities at the last half step.
-    v: Vec<Vec3>,
+    v: Vec<Vec3A>,
     /// Accelerations of this step.
-    a_new: Vec<Vec3>,
+    a_new: Vec<Vec3A>,
     /// The velocities at the step estimated for the next force pass, `v + (h/2) a`.
-    ve: Vec<Vec3>,
+    ve: Vec<Vec3A>,
     /// CSR neighbour lists: `nbr[start[i]..start[i+1]]`, with rest length and m_j / (m_i + m_j).
     start: Vec<u32>,
     nbr: Vec<u32>,
     rest_len: Vec<f32>,
     /// Per neighbour entry: X_j − X_i.
-    rest_off: Vec<Vec3>,
+    rest_off: Vec<Vec3A>,
     weight: Vec<f32>,
     /// Per vertex: 4 particles and the rest offsets from them to the vertex.
     vert_particles: Vec<[u32; 4]>,
@@ -291,7 +294,7 @@ pub struct ParticleSkin {
     rot: Vec<Quat>,
     rot_new: Vec<Quat>,
     /// Half each particle's rotation matrix, for the pairs' mean rotation.
-    half_rot: Vec<Mat3>,
+    half_rot: Vec<Mat3A>,
     /// Per particle: det Σ_j (X_j − X_i)(X_j − X_i)ᵀ (None when its neighbours span no
     /// volume), and the current volume change J.
     rest_inv: Vec<Option<f32>>,
@@ -369,19 +372,16 @@ impl ParticleSkin {
             })
             .unzip();
         let diag = rest.bounds().size().length();
-        let rest_off: Vec<Vec3> = (0..n)
+        let xa: Vec<Vec3A> = positions.iter().map(|&p| p.into()).collect();
+        let rest_off: Vec<Vec3A> = (0..n)
             .flat_map(|i| (start[i]..start[i + 1]).map(move |e| (i, e as usize)))
-            .map(|(i, e)| positions[nbr[e] as usize] - positions[i])
+            .map(|(i, e)| xa[nbr[e] as usize] - xa[i])
             .collect();
         let rest_inv: Vec<Option<f32>> = (0..n)
             .into_par_iter()
             .map(|i| {
-                let b = neighbourhood(
-                    &positions,
-                    &positions,
-                    &nbr[start[i] as usize..start[i + 1] as usize],
-                    i,
-                );
+                let r = start[i] as usize..start[i + 1] as usize;
+                let b = neighbourhood(&xa, &nbr[r.clone()], &rest_off[r], i);
                 let scale = b.x_axis.length() + b.y_axis.length() + b.z_axis.length();
                 let det = b.determinant();
                 (det.abs() > 1e-6 * scale.powi(3)).then_some(det)
@@ -396,9 +396,10 @@ impl ParticleSkin {
             radii,
             bone,
             x: positions,
-            v: vec![Vec3::ZERO; n],
-            a_new: vec![Vec3::ZERO; n],
-            ve: vec![Vec3::ZERO; n],
+            xa,
+            v: vec![Vec3A::ZERO; n],
+            a_new: vec![Vec3A::ZERO; n],
+            ve: vec![Vec3A::ZERO; n],
             rest_off,
             start,
             nbr,
@@ -409,7 +410,7 @@ impl ParticleSkin {
             bone_rot: vec![Quat::IDENTITY; bones.len()],
             rot: vec![Quat::IDENTITY; n],
             rot_new: vec![Quat::IDENTITY; n],
-            half_rot: vec![Mat3::IDENTITY * 0.5; n],
+            half_rot: vec![Mat3A::IDENTITY * 0.5; n],
             rest_inv,
             jac: vec![1.0; n],
             bones: bones.len(),
@@ -475,8 +476,8 @@ impl ParticleSkin {
                 // Pass 0: each particle's rotation (a few iterations from the last one) and
                 // its neighbourhood's volume change J = det(A B⁻¹).
                 let (x, rest, st, nb, rot, binv) = (
-                    &self.x,
-                    &self.rest,
+                    &self.xa,
+                    &self.rest_off,
                     &self.start,
                     &self.nbr,
                     &self.rot,
@@ -490,11 +491,11 @@ impl ParticleSkin {
                     .for_each(|(c, ((out, jac), hr))| {
                         for k in 0..out.len() {
                             let i = c * CHUNK + k;
-                            let a =
-                                neighbourhood(x, rest, &nb[st[i] as usize..st[i + 1] as usize], i);
+                            let r = st[i] as usize..st[i + 1] as usize;
+                            let a = neighbourhood(x, &nb[r.clone()], &rest[r], i);
                             if corotated {
                                 out[k] = extract_rotation(&a, rot[i], 1);
-                                hr[k] = Mat3::from_quat(out[k]) * 0.5;
+                                hr[k] = Mat3A::from_quat(out[k]) * 0.5;
                             }
                             // det(A B⁻¹) as det A / det B: exactly 1 at rest.
                             jac[k] = match binv[i] {
@@ -510,7 +511,7 @@ impl ParticleSkin {
             // Pass 1: accelerations from x_n and the estimated v_n.
             {
                 let (hrot, jac) = (&self.half_rot, &self.jac);
-                let (x, ve, rest, bone) = (&self.x, &self.ve, &self.rest, &self.bone);
+                let (x, ve, rest, bone) = (&self.xa, &self.ve, &self.rest, &self.bone);
                 let (st, nb, rl, wt, ro) = (
                     &self.start,
                     &self.nbr,
@@ -526,7 +527,7 @@ impl ParticleSkin {
                             let i = c * CHUNK + k;
                             let xi = x[i];
                             let vi = ve[i];
-                            let mut acc = Vec3::ZERO;
+                            let mut acc = Vec3A::ZERO;
                             let edges = st[i] as usize..st[i + 1] as usize;
                             // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
                             let pi = 0.5 * kv * jac[i] - kv;
@@ -561,7 +562,7 @@ impl ParticleSkin {
                                     acc += wt[e] * (f * n + p * dx);
                                 }
                             }
-                            let target = tf[bone[i] as usize].transform_point3(rest[i]);
+                            let target = tf[bone[i] as usize].transform_point3a(rest[i].into());
                             acc += kb * (target - xi) - cb * vi;
                             *o = acc;
                         }
@@ -580,7 +581,7 @@ impl ParticleSkin {
                 .collect();
             let (rest, bone, a_new) = (&self.rest, &self.bone, &self.a_new);
             let failed = self
-                .x
+                .xa
                 .par_chunks_mut(CHUNK)
                 .zip(self.v.par_chunks_mut(CHUNK))
                 .zip(self.ve.par_chunks_mut(CHUNK))
@@ -594,7 +595,8 @@ impl ParticleSkin {
                         xs[k] += h * vs[k];
                         ves[k] = vs[k] + (0.5 * h) * an;
                         if bad.is_none() {
-                            let target = tf_next[bone[i] as usize].transform_point3(rest[i]);
+                            let target =
+                                tf_next[bone[i] as usize].transform_point3a(rest[i].into());
                             let dev = xs[k].distance(target);
                             if dev.is_nan() || dev > limit || !vs[k].is_finite() {
                                 bad = Some((i, dev));
@@ -623,6 +625,9 @@ impl ParticleSkin {
             }
         }
         self.bone_rot = s1.iter().map(|&(q, _)| q).collect();
+        for (d, &p) in self.x.iter_mut().zip(&self.xa) {
+            *d = p.into();
+        }
         // Frame metrics, gathered in particle order.
         let end_tf: Vec<Affine3A> = s1
             .iter()
@@ -674,8 +679,8 @@ impl ParticleSkin {
         (0..self.x.len())
             .into_par_iter()
             .map(|i| {
-                let nb = &self.nbr[self.start[i] as usize..self.start[i + 1] as usize];
-                let a = neighbourhood(&self.x, &self.rest, nb, i);
+                let r = self.start[i] as usize..self.start[i + 1] as usize;
+                let a = neighbourhood(&self.xa, &self.nbr[r.clone()], &self.rest_off[r], i);
                 // Tracked rotations need one round to catch up with the last substep.
                 match self.params.spring {
                     Spring::Corotated => extract_rotation(&a, self.rot[i], 1),
@@ -724,21 +729,20 @@ impl ParticleSkin {
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
 /// into current ones.
-fn neighbourhood(x: &[Vec3], rest: &[Vec3], nb: &[u32], i: usize) -> Mat3 {
-    let mut a = Mat3::ZERO;
-    for &j in nb {
+fn neighbourhood(x: &[Vec3A], nb: &[u32], rest_off: &[Vec3A], i: usize) -> Mat3A {
+    let mut a = Mat3A::ZERO;
+    for (&j, &r) in nb.iter().zip(rest_off) {
         let d = x[j as usize] - x[i];
-        let r = rest[j as usize] - rest[i];
-        a += Mat3::from_cols(d * r.x, d * r.y, d * r.z);
+        a += Mat3A::from_cols(d * r.x, d * r.y, d * r.z);
     }
     a
 }
 
 /// The rotation part of `a` (Müller et al.'s iteration on a quaternion, `rounds` fixed rounds
 /// from `q`): deterministic, and falls back to `q` where `a` carries no rotation.
-fn extract_rotation(a: &Mat3, mut q: Quat, rounds: u32) -> Quat {
+fn extract_rotation(a: &Mat3A, mut q: Quat, rounds: u32) -> Quat {
     for _ in 0..rounds {
-        let r = Mat3::from_quat(q);
+        let r = Mat3A::from_quat(q);
         let num = r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
         let den = (r.x_axis.dot(a.x_axis) + r.y_axis.dot(a.y_axis) + r.z_axis.dot(a.z_axis)).abs()
             + 1e-20;
@@ -956,7 +960,7 @@ mod tests {
     #[test]
     fn rotation_extraction_finds_a_rotation() {
         let q = Quat::from_rotation_x(2.5) * Quat::from_rotation_z(0.3);
-        let a = Mat3::from_quat(q) * Mat3::from_diagonal(Vec3::new(1.2, 0.9, 1.0));
+        let a = Mat3A::from_quat(q) * Mat3A::from_diagonal(Vec3::new(1.2, 0.9, 1.0));
         let r = extract_rotation(&a, Quat::IDENTITY, 40);
         assert!(r.angle_between(q) < 1e-3, "{r} {q}");
     }
