@@ -692,7 +692,7 @@ impl ClothSim {
             }
         }
         for d in depth {
-            if let Some(s) = d.sample(x, 1.0) {
+            if let Some(s) = d.sample(x, 2.0 * eps, 1.0) {
                 worst = worst.max(eps - s.distance);
             }
         }
@@ -894,12 +894,13 @@ fn update_chunk(
                 continue;
             }
             let mut x = out.truncate();
-            let Some(sample) = collider.sample(x, ctx.s) else {
+            let from = pos[i].truncate();
+            let reach = 2.0 * ctx.eps + (x - from).length();
+            let Some(sample) = collider.sample(x, reach, ctx.s) else {
                 continue;
             };
             // Depth maps carry the side themselves: no memory to keep.
             let mut side = glam::Vec4::ZERO;
-            let from = pos[i].truncate();
             if let Some(hit) =
                 contact::respond(&mut x, from, &sample, &mut side, ctx.eps, ctx.friction)
             {
