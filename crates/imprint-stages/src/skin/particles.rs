@@ -72,11 +72,14 @@
 //!
 //! **Cost.** Per substep three passes over the particles: rotations and volume change
 //! (corotated springs or pressure only), the forces (about 10 neighbours each), and the
-//! update; per frame O(vertices × 4) for the mesh (plus one rotation fit per particle with
-//! [`VertexRotation::Particle`]). Memory O(particles × neighbours). Measured on the 2-core
-//! machine while another build ran (so an upper bound): 5.2k particles, 10k vertices, 24
-//! substeps: about 50 ms per frame with the defaults, 14–20 ms with T's set (before the
-//! default went to 18 substeps). The 8 ms goal is not met yet.
+//! update; per frame O(vertices × 4) for the mesh (plus one rotation round per particle with
+//! [`VertexRotation::Particle`]). Positions, velocities and rotations are SIMD-aligned
+//! (`Vec3A`, `Mat3A`) in the loops. Memory O(particles × neighbours). Measured (test
+//! `frame_cost_at_5k_particles_and_10k_vertices`) on the 2-core machine while another
+//! build ran, so upper bounds: 5.2k particles, 10k vertices: 12–21 ms per frame with the
+//! defaults (18 substeps), 9–14 ms with T's set (24 substeps), vertices under 1 ms. Not yet
+//! the 8 ms goal. Fitting the rotations inside the force pass (one substep late) would save
+//! the first pass but made the defaults unstable at 18 substeps.
 //!
 //! **Determinism.** Each particle's force is gathered from its own neighbour list in list
 //! order (no scatter, no atomics), every particle is written by one task, the rotation
