@@ -212,3 +212,159 @@ fn deterministic() {
     assert_eq!(ra, rb);
     assert_eq!(a, b);
 }
+
+/// The benchmark's case (BENCHMARKS.md §9): a 50k-triangle torus body, a 20k-vertex torus
+/// garment inside it, T's three views at 512². Prints each phase's median wall time and mean
+/// CPU time (all threads; steadier on a loaded machine) and those of one `drape_cpu` call; run
+/// with `--ignored --nocapture` (release). `DRAPE_LOOP=n` repeats each phase n times (default 9).
+#[test]
+#[ignore]
+fn drape_phase_timing() {
+    use imprint_core::mesh::primitives::torus;
+    use imprint_core::raster::{RasterOptions, rasterize_depth_with};
+    use imprint_stages::snow::arrival::snow_camera;
+    use std::time::Instant;
+    let body = torus(0.5, 0.2, 250, 100);
+    let garment = torus(0.5, 0.18, 200, 100).positions;
+    let p = DrapeParams::default();
+    let runs: usize = std::env::var("DRAPE_LOOP")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(9);
+    // CPU time of the process so far (user + system, all threads), ms.
+    let cpu = || {
+        let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+        let after = stat.rsplit(')').next().unwrap_or("");
+        let f: Vec<f64> = after
+            .split_whitespace()
+            .skip(11)
+            .take(2)
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        f.iter().sum::<f64>() * 10.0 // clock ticks of 10 ms
+    };
+    let time = |label: &str, f: &mut dyn FnMut()| {
+        let c0 = cpu();
+        let mut wall: Vec<f64> = (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        let c = (cpu() - c0) / runs as f64;
+        wall.sort_by(f64::total_cmp);
+        println!(
+            "{label}: wall {:.2} ms (median), cpu {c:.1} ms",
+            wall[runs / 2]
+        );
+    };
+    let bounds = body.bounds();
+    time("2 renders (one line of views)", &mut || {
+        for d in [Vec3::NEG_Y, Vec3::Y] {
+            let cam = snow_camera(&bounds, d, p.resolution).unwrap();
+            rasterize_depth_with(&body, &cam, 512, 512, &RasterOptions::default()).unwrap();
+        }
+    });
+    time("InsideTest::new", &mut || {
+        InsideTest::new(&body);
+    });
+    time("InsideTest::rays_only", &mut || {
+        InsideTest::rays_only(&body);
+    });
+    let test = InsideTest::rays_only(&body);
+    time("20k inside tests (rays only)", &mut || {
+        assert_eq!(
+            garment.iter().filter(|q| test.inside(**q)).count(),
+            garment.len()
+        );
+    });
+    let test = InsideTest::new(&body);
+    time("20k inside tests", &mut || {
+        assert_eq!(
+            garment.iter().filter(|q| test.inside(**q)).count(),
+            garment.len()
+        );
+    });
+    time("drape_cpu", &mut || {
+        drape_cpu(&body, &mut garment.clone(), &p).unwrap();
+    });
+}
+
+/// Writes every case's report and output positions (bits) to the file `DRAPE_DUMP` names: run
+/// before and after a change to the fit's speed to compare outputs byte for byte.
+#[test]
+#[ignore]
+fn drape_dump() {
+    use imprint_core::mesh::primitives::torus;
+    use std::fmt::Write;
+    let Ok(path) = std::env::var("DRAPE_DUMP") else {
+        return;
+    };
+    let axes = vec![
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ];
+    let mut fourteen = axes.clone();
+    for i in 0..8 {
+        let s = |b: u32| if i & b == 0 { 1.0 } else { -1.0 };
+        fourteen.push(Vec3::new(s(1), s(2), s(4)).normalize());
+    }
+    let sets = [DrapeParams::default().views, axes, fourteen];
+    let u = u_body();
+    let b = u.bounds();
+    let n = 24;
+    let lattice: Vec<Vec3> = (0..n * n * n)
+        .map(|i| {
+            let t = Vec3::new(
+                (i % n) as f32 + 0.5,
+                ((i / n) % n) as f32 + 0.5,
+                (i / (n * n)) as f32 + 0.5,
+            ) / n as f32;
+            b.min + t * (b.max - b.min)
+        })
+        .collect();
+    let turned = Quat::from_axis_angle(Vec3::new(1.0, 2.0, 0.5).normalize(), 0.7);
+    let mut boxed = cuboid(Vec3::new(0.5, 0.4, 0.3), 4);
+    for p in &mut boxed.positions {
+        *p = turned * *p;
+    }
+    let cases = [
+        (
+            torus(0.5, 0.2, 250, 100),
+            torus(0.5, 0.18, 200, 100).positions,
+            512,
+        ),
+        (u, lattice, 128),
+        (boxed, uv_sphere(0.5, 48, 24).positions, 96),
+        (
+            uv_sphere(1.0, 64, 32),
+            uv_sphere(0.95, 40, 20).positions,
+            128,
+        ),
+    ];
+    let mut out = String::new();
+    for (c, (body, garment, res)) in cases.iter().enumerate() {
+        for (s, views) in sets.iter().enumerate() {
+            for fallback in [Fallback::None, Fallback::distance_field()] {
+                let p = DrapeParams {
+                    views: views.clone(),
+                    resolution: *res,
+                    offset: 0.002,
+                    fallback,
+                };
+                let mut g = garment.clone();
+                let r = drape_cpu(body, &mut g, &p).unwrap();
+                let _ = writeln!(out, "case {c} views {s} {fallback:?}: {r:?}");
+                for (i, q) in g.iter().enumerate() {
+                    let _ = writeln!(out, "{i} {:?}", q.to_array().map(f32::to_bits));
+                }
+            }
+        }
+    }
+    std::fs::write(path, out).unwrap();
+}

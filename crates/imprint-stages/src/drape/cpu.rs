@@ -2,6 +2,7 @@
 //! pushes and their check, and the distance-field fallback (see the module doc of
 //! [`super`] for the method and the definitions).
 
+use super::collider::distinct_lines;
 use super::inside::InsideTest;
 use super::params::{DrapeParams, Fallback};
 use crate::snow::arrival::{Lookup, snow_camera};
@@ -126,8 +127,10 @@ pub fn drape_with(
         return Ok(report);
     }
     let res = params.resolution;
+    // Opposite directions give the same pair of maps (front of d = back of −d), hence the
+    // same pushes: one view per line (T's three views are two lines).
     let mut views = Vec::with_capacity(params.views.len());
-    for dir in params.directions() {
+    for dir in distinct_lines(&params.views) {
         let mut map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
             let cam = snow_camera(&bounds, d, res)?;
             let m = rasterize(body, &cam, res, res, &RasterOptions::default())?;
@@ -146,7 +149,8 @@ pub fn drape_with(
         });
     }
     let texel = report.texel;
-    let test = InsideTest::new(body);
+    // The garment lies near the surface, where the far-cell grid seldom answers.
+    let test = InsideTest::rays_only(body);
     let offset = params.offset;
 
     // Per vertex: None = outside (untouched); Some(Ok(new)) = resolved; Some(Err(())) =
@@ -154,7 +158,7 @@ pub fn drape_with(
     let outcome: Vec<Option<std::result::Result<Vec3, ()>>> = garment
         .par_iter()
         .with_min_len(256)
-        .map(|&p| {
+        .map_init(Vec::new, |crossings, &p| {
             if !test.inside(p) {
                 return None;
             }
@@ -163,7 +167,7 @@ pub fn drape_with(
                 .filter_map(|v| v.push(p, offset))
                 .min_by(|a, b| a.length.total_cmp(&b.length));
             Some(match best {
-                Some(push) if leaves_cleanly(&test, p, push, texel) => {
+                Some(push) if leaves_cleanly(&test, p, push, texel, crossings) => {
                     Ok(p + push.dir * push.length)
                 }
                 _ => Err(()),
@@ -194,12 +198,12 @@ pub fn drape_with(
         let step = field.spec.cell.min(texel);
         let fixed: Vec<Option<Vec3>> = unresolved
             .par_iter()
-            .map(|&i| field_push(&field, garment[i], offset))
-            .map(|(p, candidates)| {
+            .map_init(Vec::new, |crossings, &i| {
+                let (p, candidates) = field_push(&field, garment[i], offset);
                 candidates
                     .into_iter()
                     .flatten()
-                    .find(|push| leaves_cleanly(&test, p, *push, step))
+                    .find(|push| leaves_cleanly(&test, p, *push, step, crossings))
                     .map(|push| p + push.dir * push.length)
             })
             .collect();
@@ -222,10 +226,54 @@ fn apply(report: &mut DrapeReport, p: &mut Vec3, q: Vec3) {
     }
 }
 
-/// Whether the straight path of a push leaves the body once and for all: sampled every half
-/// `texel` from `p` to half a texel past the pushed point, no sample is inside once one has
-/// been outside, and the last one is outside. Gaps thinner than half a texel are not seen.
-fn leaves_cleanly(test: &InsideTest, p: Vec3, push: Push, texel: f32) -> bool {
+/// Whether the straight path of a push leaves the body once and for all, to half a `texel`
+/// past the pushed point: it crosses the surface once (crossings that coincide, as on a face
+/// two touching pieces share, cancel in pairs) and ends outside. `p` is inside.
+///
+/// Along an axis the crossings are exact: one walk of the inside test's triangle list for that
+/// axis ([`InsideTest::ray_crossings`]), where the ray agrees with the test's vote at `p`.
+/// Otherwise the path is sampled every half texel with the full test ([`sampled_path`]).
+fn leaves_cleanly(
+    test: &InsideTest,
+    p: Vec3,
+    push: Push,
+    texel: f32,
+    crossings: &mut Vec<f64>,
+) -> bool {
+    let Some(axis) = (0..3).find(|&a| push.dir[a].abs() == 1.0) else {
+        return sampled_path(test, p, push, texel);
+    };
+    let end = p + push.dir * (push.length + 0.5 * texel);
+    let reach = (end[axis] as f64 - p[axis] as f64).abs();
+    let positive = push.dir[axis] > 0.0;
+    if test.ray_crossings(p, axis, positive, reach, crossings) != Some(true) {
+        return sampled_path(test, p, push, texel);
+    }
+    // Crossings closer than this are one place on the surface (f32 rounding of the corners
+    // of two tessellations of one face), far below the half texel the samples resolved.
+    let scale = p[axis].abs() as f64 + reach;
+    let tol = (1e-3 * texel as f64).max(8.0 * f32::EPSILON as f64 * scale);
+    crossings.sort_unstable_by(f64::total_cmp);
+    let mut surfaces = 0;
+    let mut k = 0;
+    while k < crossings.len() {
+        let mut run = k + 1;
+        while run < crossings.len() && crossings[run] - crossings[run - 1] <= tol {
+            run += 1;
+        }
+        surfaces += (run - k) % 2;
+        k = run;
+    }
+    // One surface: the ray along the axis crosses it an even number of times past `end`
+    // (outside by this ray), so the test's vote there needs only the other two rays (or none,
+    // when `end` lies on the surface, which counts as outside).
+    surfaces == 1 && (crossings.last() == Some(&reach) || !test.exact_even_along(end, axis))
+}
+
+/// [`leaves_cleanly`] by samples every half `texel` from `p` to half a texel past the pushed
+/// point: no sample is inside once one has been outside, and the last one is outside. Gaps
+/// thinner than half a texel are not seen.
+fn sampled_path(test: &InsideTest, p: Vec3, push: Push, texel: f32) -> bool {
     let h = 0.5 * texel;
     let end = push.length + h;
     let steps = ((end / h).ceil() as usize).clamp(1, 1 << 16);

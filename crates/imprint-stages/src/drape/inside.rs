@@ -189,6 +189,8 @@ fn even_edges(mesh: &Mesh) -> bool {
 }
 
 impl InsideTest {
+    /// The test with its voxel grid of far cells: worth it for many queries spread through
+    /// and around the body.
     pub fn new(mesh: &Mesh) -> Self {
         let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
             .map(|t| mesh.triangle(t))
@@ -225,6 +227,29 @@ impl InsideTest {
         test
     }
 
+    /// The test by the rays alone (same answers as [`InsideTest::new`]'s): for queries near
+    /// the surface (a garment on a body), which the grid would leave to the rays anyway, at
+    /// about half the set-up cost.
+    pub fn rays_only(mesh: &Mesh) -> Self {
+        let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
+            .map(|t| mesh.triangle(t))
+            .collect();
+        let bounds = mesh.bounds();
+        let (x, (y, z)) = rayon::join(
+            || AxisGrid::new(&tris, &bounds, 0),
+            || {
+                rayon::join(
+                    || AxisGrid::new(&tris, &bounds, 1),
+                    || AxisGrid::new(&tris, &bounds, 2),
+                )
+            },
+        );
+        InsideTest {
+            axes: [x, y, z],
+            cells: None,
+        }
+    }
+
     /// Whether `p` is inside the body (two of the three rays cross its surface an odd number
     /// of times).
     /// A point exactly on the surface (a ray meets a triangle at the point itself) is outside.
@@ -250,6 +275,45 @@ impl InsideTest {
         self.axes[0].odd_crossings(p)
     }
 
+    /// The surface crossings of the ray from `p` along axis `axis` (0, 1, 2 for x, y, z),
+    /// towards + when `positive`: the distances of those within `reach` of `p` go to `out`
+    /// (cleared first; unsorted); returns the parity of all of them (odd: inside by this one
+    /// ray), `None` when `p` lies on a triangle the ray meets. One walk of the triangle list of
+    /// the cell `p` projects into (what [`InsideTest::exact`] reads for that axis).
+    pub fn ray_crossings(
+        &self,
+        p: Vec3,
+        axis: usize,
+        positive: bool,
+        reach: f64,
+        out: &mut Vec<f64>,
+    ) -> Option<bool> {
+        out.clear();
+        let g = &self.axes[axis];
+        let Some(list) = g.cell_list(p) else {
+            return Some(false);
+        };
+        let q = DVec2::new(p[g.uv[0]] as f64, p[g.uv[1]] as f64);
+        let pw = p[axis] as f64;
+        let mut odd = false;
+        for &t in list {
+            let Some(w) = crossing(&g.tris[t as usize], q) else {
+                continue;
+            };
+            let s = if positive { w - pw } else { pw - w };
+            if s == 0.0 {
+                return None;
+            }
+            if s > 0.0 {
+                odd = !odd;
+                if s <= reach {
+                    out.push(s);
+                }
+            }
+        }
+        Some(odd)
+    }
+
     /// [`InsideTest::inside`] by the three rays, without the voxel grid.
     pub fn exact(&self, p: Vec3) -> bool {
         let mut votes = 0;
@@ -260,6 +324,15 @@ impl InsideTest {
             }
         }
         votes >= 2
+    }
+
+    /// [`InsideTest::exact`] at a point where the ray along `axis` is known to cross the
+    /// surface an even number of times: inside only when both other rays cross it an odd
+    /// number of times (neither lying on the surface). One or two rays instead of three.
+    pub fn exact_even_along(&self, p: Vec3, axis: usize) -> bool {
+        [1, 2]
+            .into_iter()
+            .all(|k| self.axes[(axis + k) % 3].odd_crossings(p) == Some(true))
     }
 }
 
@@ -316,8 +389,9 @@ impl AxisGrid {
         let side = ((kept.len() as f64).sqrt().ceil() as usize).clamp(1, 256);
         let n = [side, side];
         let cell = size / DVec2::new(n[0] as f64, n[1] as f64);
+        // `as` truncates, which is the floor for c >= 0 (and 0 below, as the clamp would be).
         let cell_of = |q: DVec2| {
-            let c = ((q - min) / cell).floor();
+            let c = (q - min) / cell;
             [
                 (c.x.max(0.0) as usize).min(n[0] - 1),
                 (c.y.max(0.0) as usize).min(n[1] - 1),
@@ -365,21 +439,30 @@ impl AxisGrid {
         }
     }
 
-    /// Whether the ray from `p` along the axis crosses the surface an odd number of times;
-    /// `None` when `p` lies on a triangle the ray meets.
-    fn odd_crossings(&self, p: Vec3) -> Option<bool> {
+    /// The triangles whose projection may cover that of `p`: the list of the cell `p`
+    /// projects into; `None` beyond the box (no triangle there).
+    fn cell_list(&self, p: Vec3) -> Option<&[u32]> {
         let q = DVec2::new(p[self.uv[0]] as f64, p[self.uv[1]] as f64);
         let c = ((q - self.min) / self.cell).floor();
         // Beyond the box: no triangle. On its far side: the last cell (as the binning clamps).
         if !(c.x >= 0.0 && c.y >= 0.0 && c.x <= self.n[0] as f64 && c.y <= self.n[1] as f64) {
-            return Some(false);
+            return None;
         }
         let cell =
             (c.y as usize).min(self.n[1] - 1) * self.n[0] + (c.x as usize).min(self.n[0] - 1);
-        let range = self.starts[cell] as usize..self.starts[cell + 1] as usize;
+        Some(&self.items[self.starts[cell] as usize..self.starts[cell + 1] as usize])
+    }
+
+    /// Whether the ray from `p` along the axis crosses the surface an odd number of times;
+    /// `None` when `p` lies on a triangle the ray meets.
+    fn odd_crossings(&self, p: Vec3) -> Option<bool> {
+        let Some(list) = self.cell_list(p) else {
+            return Some(false);
+        };
+        let q = DVec2::new(p[self.uv[0]] as f64, p[self.uv[1]] as f64);
         let pw = p[self.axis] as f64;
         let mut odd = false;
-        for &t in &self.items[range] {
+        for &t in list {
             let t = &self.tris[t as usize];
             match crossing(t, q) {
                 Some(w) if w == pw => return None,
