@@ -114,7 +114,7 @@ pub enum VertexRotation {
 pub enum Spring {
     /// Toward the rest distance along the pair (T).
     Distance,
-    /// Toward the rest offset turned by the pair's rotation (the normalised mean of the two
+    /// Toward the rest offset turned by the pair's rotation (the mean of the two
     /// particles' rotations, each the best fit of its neighbours' rest offsets to their
     /// current ones, tracked every substep). A twist then pulls neighbours sideways instead
     /// of toward the axis, so a twisted joint keeps its section (beyond T).
@@ -448,6 +448,16 @@ impl ParticleSkin {
                 end.len()
             )));
         }
+        if let Some(b) = start
+            .iter()
+            .chain(end)
+            .position(|m| !m.is_finite())
+            .map(|k| k % self.bones)
+        {
+            return Err(Error::Invalid(format!(
+                "particle skinning: bone {b}'s skinning transform is not finite"
+            )));
+        }
         if !(dt_frame.is_finite() && dt_frame > 0.0) {
             return Err(Error::Invalid(format!(
                 "particle skinning: frame length {dt_frame} s must be > 0"
@@ -476,7 +486,7 @@ impl ParticleSkin {
             let corotated = self.params.spring == Spring::Corotated;
             let kv = self.params.volume_stiffness;
             if corotated || kv > 0.0 {
-                // Pass 0: each particle's rotation (a few iterations from the last one) and
+                // Pass 0: each particle's rotation (one round from the last one) and
                 // its neighbourhood's volume change J = det(A B⁻¹).
                 let (x, rest, st, nb, rot, binv) = (
                     &self.xa,
