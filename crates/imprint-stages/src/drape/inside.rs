@@ -19,7 +19,7 @@
 //! its cell centres (and left to the exact test when they disagree); points in near cells,
 //! beyond the grid, or of a mesh that is not closed take the exact test.
 
-use glam::{DVec2, DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec2, Vec3};
 use imprint_core::{Aabb, Mesh};
 
 /// The inside test of one closed mesh.
@@ -351,11 +351,19 @@ struct AxisGrid {
 }
 
 /// A triangle as its ray sees it: counter-clockwise projection and the axis coordinate of
-/// its corners.
+/// its corners. Kept in f32, as the mesh gives them (half the memory the queries read; the
+/// arithmetic is in f64, from the same values).
 #[derive(Clone, Copy)]
 struct Tri2 {
-    p: [DVec2; 3],
-    w: [f64; 3],
+    p: [Vec2; 3],
+    w: [f32; 3],
+}
+
+impl Tri2 {
+    #[inline]
+    fn p(&self, k: usize) -> DVec2 {
+        self.p[k].as_dvec2()
+    }
 }
 
 impl AxisGrid {
@@ -364,9 +372,10 @@ impl AxisGrid {
         let proj = |v: Vec3| DVec2::new(v[uv[0]] as f64, v[uv[1]] as f64);
         let mut kept = Vec::with_capacity(tris.len());
         for t in tris {
-            let mut p = t.map(proj);
-            let mut w = t.map(|v| v[axis] as f64);
-            let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
+            let mut p = t.map(|v| Vec2::new(v[uv[0]], v[uv[1]]));
+            let mut w = t.map(|v| v[axis]);
+            let d = p.map(|q| q.as_dvec2());
+            let area = (d[1] - d[0]).perp_dot(d[2] - d[0]);
             if area == 0.0 || !area.is_finite() {
                 continue; // parallel to the ray: never crossed
             }
@@ -401,8 +410,8 @@ impl AxisGrid {
         let ranges: Vec<([usize; 2], [usize; 2])> = kept
             .iter()
             .map(|t| {
-                let lo = t.p[0].min(t.p[1]).min(t.p[2]);
-                let hi = t.p[0].max(t.p[1]).max(t.p[2]);
+                let lo = t.p(0).min(t.p(1)).min(t.p(2));
+                let hi = t.p(0).max(t.p(1)).max(t.p(2));
                 (cell_of(lo), cell_of(hi))
             })
             .collect();
@@ -480,8 +489,8 @@ impl AxisGrid {
 fn crossing(t: &Tri2, q: DVec2) -> Option<f64> {
     let mut b = [0f64; 3];
     for (k, bk) in b.iter_mut().enumerate() {
-        let a = t.p[(k + 1) % 3];
-        let c = t.p[(k + 2) % 3];
+        let a = t.p((k + 1) % 3);
+        let c = t.p((k + 2) % 3);
         let d = c - a;
         let e = d.perp_dot(q - a);
         let owns = d.y > 0.0 || (d.y == 0.0 && d.x < 0.0);
@@ -494,7 +503,8 @@ fn crossing(t: &Tri2, q: DVec2) -> Option<f64> {
     if sum <= 0.0 {
         return None;
     }
-    Some((b[0] * t.w[0] + b[1] * t.w[1] + b[2] * t.w[2]) / sum)
+    let w = t.w.map(f64::from);
+    Some((b[0] * w[0] + b[1] * w[1] + b[2] * w[2]) / sum)
 }
 
 #[cfg(test)]
