@@ -70,8 +70,9 @@ impl Default for FillParams {
 
 /// More levels than this is a typo (a level-0 cube would be 2^15 finest cubes across).
 pub const MAX_LEVELS: u32 = 16;
-/// More particles than this is refused before filling.
-pub const MAX_PARTICLES: u64 = 20_000_000;
+/// A finest lattice over the mesh's box with more sites than this is refused before filling
+/// (the adaptive fill visits the surface's share of them; a uniform one all the inside).
+pub const MAX_LATTICE: f64 = 4e9;
 
 impl FillParams {
     /// Checks every number; errors name the field.
@@ -167,9 +168,11 @@ pub fn fill(mesh: &Mesh, params: &FillParams) -> Result<Fill> {
         .max(glam::UVec3::ONE);
     let roots = n.x as u64 * n.y as u64 * n.z as u64;
     let fine_cells = ((bounds.size() / a_fine).ceil() + 1.0).as_dvec3();
-    if roots > MAX_PARTICLES || 4.0 * fine_cells.x * fine_cells.y * fine_cells.z > 1e12 {
+    let sites = 4.0 * fine_cells.x * fine_cells.y * fine_cells.z;
+    if sites > MAX_LATTICE {
         return Err(Error::Invalid(format!(
-            "fill.radius = {}: too small for a mesh of size {} (more than {MAX_PARTICLES} particles)",
+            "fill.radius = {}: too small for a mesh of size {} (the finest lattice over its box \
+             would have {sites:.2e} sites, more than {MAX_LATTICE:e})",
             params.radius,
             bounds.size()
         )));
@@ -340,6 +343,20 @@ mod tests {
         )
         .unwrap();
         assert_eq!(f.report.uniform_count, f.report.adaptive_count);
+    }
+
+    #[test]
+    fn a_radius_too_small_is_refused() {
+        let m = primitives::cuboid(Vec3::splat(1.0), 1);
+        let e = fill(
+            &m,
+            &FillParams {
+                radius: 1e-4,
+                levels: 3,
+            },
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("fill.radius"), "{e}");
     }
 
     #[test]
