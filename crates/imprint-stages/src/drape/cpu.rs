@@ -127,30 +127,40 @@ pub fn drape_with(
         return Ok(report);
     }
     let res = params.resolution;
-    // Opposite directions give the same pair of maps (front of d = back of −d), hence the
-    // same pushes: one view per line (T's three views are two lines).
-    let mut views = Vec::with_capacity(params.views.len());
-    for dir in distinct_lines(&params.views) {
-        let mut map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
-            let cam = snow_camera(&bounds, d, res)?;
-            let m = rasterize(body, &cam, res, res, &RasterOptions::default())?;
-            let look = Lookup::new(&m);
-            Ok((m, look))
-        };
-        let (front, front_look) = map(dir)?;
-        let (back, back_look) = map(-dir)?;
-        report.texel = report.texel.max(front_look.texel).max(back_look.texel);
-        views.push(View {
-            dir,
-            front,
-            front_look,
-            back,
-            back_look,
-        });
+    // The inside test is built while the maps are rendered: its three axes do not share two
+    // threads evenly, the renders fill the gap. (The rasteriser may not be `Send`, so the
+    // build is the spawned job.)
+    let mut test = None;
+    let views = rayon::in_place_scope(|s| {
+        // The garment lies near the surface, where the far-cell grid seldom answers.
+        s.spawn(|_| test = Some(InsideTest::rays_only(body)));
+        // Opposite directions give the same pair of maps (front of d = back of −d), hence the
+        // same pushes: one view per line (T's three views are two lines).
+        let mut views = Vec::with_capacity(params.views.len());
+        for dir in distinct_lines(&params.views) {
+            let mut map = |d: Vec3| -> Result<(DepthMap, Lookup)> {
+                let cam = snow_camera(&bounds, d, res)?;
+                let m = rasterize(body, &cam, res, res, &RasterOptions::default())?;
+                let look = Lookup::new(&m);
+                Ok((m, look))
+            };
+            let (front, front_look) = map(dir)?;
+            let (back, back_look) = map(-dir)?;
+            views.push(View {
+                dir,
+                front,
+                front_look,
+                back,
+                back_look,
+            });
+        }
+        Ok::<_, imprint_core::Error>(views)
+    })?;
+    let test = test.expect("the scope ran the build");
+    for v in &views {
+        report.texel = report.texel.max(v.front_look.texel).max(v.back_look.texel);
     }
     let texel = report.texel;
-    // The garment lies near the surface, where the far-cell grid seldom answers.
-    let test = InsideTest::rays_only(body);
     let offset = params.offset;
 
     // Per vertex: None = outside (untouched); Some(Ok(new)) = resolved; Some(Err(())) =
