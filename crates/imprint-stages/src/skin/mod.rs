@@ -5,12 +5,14 @@
 //!   and the pose at a time (per-bone skinning transforms).
 //! - [`weights`]: automatic weights for the blends.
 //! - [`blend`]: LBS and DQS.
+//! - [`gpu`]: LBS and DQS as a compute dispatch, tested against [`blend`].
 //! - [`fill`]: the adaptive close-packed particle fill.
 //! - [`particles`]: the particle skinning simulation and its vertices.
 //! - [`measure`]: volume, joint cross-section and self-intersection of a skinned mesh.
 
 pub mod blend;
 pub mod fill;
+pub mod gpu;
 pub mod measure;
 pub mod particles;
 pub mod rig;
