@@ -129,6 +129,11 @@ enum Stage {
         /// The ground's passes on the GPU too (heights kept there), when they can be.
         gpu_ground: Option<Box<imprint_stages::ground::gpu::GpuGround>>,
     },
+    /// A mesh deformed by a rig, every frame.
+    Skin {
+        input: Option<String>,
+        stage: Box<crate::skin_stage::SkinStage>,
+    },
     /// A garment fitted out of a body, every frame the body or garment changes.
     Drape {
         body: String,
@@ -647,6 +652,25 @@ pub fn run_observed(
                         None => Value::Mesh(Arc::new(sim.displaced(0, refs[0]))),
                     };
                     values.insert(name.clone(), v);
+                    bump(&mut versions, name);
+                    began = true;
+                    true
+                }
+                Stage::Skin { input, stage } => {
+                    let mesh_in = input.as_ref().map(|i| match values.get(i.as_str()) {
+                        Some(Value::Mesh(m)) => m.clone(),
+                        _ => unreachable!("edges are typed"),
+                    });
+                    let (mesh, m) = stage
+                        .frame(mesh_in.as_ref(), frame, time, 1.0 / plan.file.fps)
+                        .map_err(|e| at_node(e, name, frame))?;
+                    if first_run {
+                        for (k, v) in stage.summary() {
+                            nr.metrics.insert(k, v);
+                        }
+                    }
+                    push_per_frame(nr, m);
+                    values.insert(name.clone(), Value::Mesh(Arc::new(mesh)));
                     bump(&mut versions, name);
                     began = true;
                     true
@@ -1499,6 +1523,10 @@ fn build_stages(
                     every: w.every,
                 }
             }
+            NodeSpec::Skin(k) => Stage::Skin {
+                input: k.mesh.clone(),
+                stage: Box::new(crate::skin_stage::SkinStage::new(name, k, &plan.base_dir)?),
+            },
             NodeSpec::Drape(d) => Stage::Drape {
                 body: d.body.clone(),
                 garment: d.garment.clone(),

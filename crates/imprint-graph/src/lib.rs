@@ -14,6 +14,7 @@ pub mod report;
 pub mod rig;
 pub mod schedule;
 pub mod schema;
+pub mod skin_stage;
 
 pub use diagnostics::PipelineError;
 pub use plan::{Plan, load, parse};

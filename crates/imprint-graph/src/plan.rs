@@ -411,6 +411,46 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
             }
         }
         NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => {}
+        NodeSpec::Skin(k) => {
+            let full = base_dir.join(&k.rig);
+            if !full.is_file() {
+                return Err(fail(
+                    "rig",
+                    format!("rig file not found: {}", full.display()),
+                ));
+            }
+            // The rig file's own errors name its file, line and column.
+            let loaded = crate::rig::load(&full)?;
+            if k.mesh.is_none() && loaded.mesh.is_none() {
+                return Err(fail(
+                    "mesh",
+                    format!(
+                        "give the Mesh node to skin (mesh: \"...\"), or bind one in {} (mesh: \"file.obj\")",
+                        full.display()
+                    ),
+                ));
+            }
+            let offset = glam::Vec3::from(k.offset);
+            if !offset.is_finite() {
+                return Err(fail("offset", format!("offset {offset} must be finite")));
+            }
+            match &k.method {
+                crate::schema::SkinMethod::Particles(p) => p.validate(),
+                crate::schema::SkinMethod::Linear { weights }
+                | crate::schema::SkinMethod::DualQuaternion { weights } => weights.validate(),
+            }
+            .map_err(|e| fail("method", e.to_string()))?;
+            if matches!(k.method, crate::schema::SkinMethod::Particles(_))
+                && k.backend == Some(Backend::Gpu)
+            {
+                return Err(fail(
+                    "backend",
+                    "particle skinning runs on the CPU (Linear and DualQuaternion have a GPU \
+                     path); set backend: Cpu, or leave it out"
+                        .into(),
+                ));
+            }
+        }
         NodeSpec::Drape(d) => {
             d.params
                 .validate()

@@ -97,7 +97,8 @@ impl NodeSpec {
             | NodeSpec::Cloth(_)
             | NodeSpec::Ground(_)
             | NodeSpec::Snow(_)
-            | NodeSpec::Drape(_) => (1, 0),
+            | NodeSpec::Drape(_)
+            | NodeSpec::Skin(_) => (1, 0),
         };
         let (split, interpolate) = match self {
             NodeSpec::DistanceField(f) => (f.split, f.interpolate),
@@ -126,6 +127,7 @@ impl NodeSpec {
             NodeSpec::Ground(g) => g.enabled,
             NodeSpec::Snow(n) => n.enabled,
             NodeSpec::Drape(d) => d.enabled,
+            NodeSpec::Skin(k) => k.enabled,
         }
     }
 }
@@ -147,7 +149,10 @@ impl Plan {
             let node = &nodes[name];
             let is_static = match node {
                 NodeSpec::Mesh(m) => m.motion.iter().all(|mo| mo.is_time_invariant()),
-                NodeSpec::Cloth(_) | NodeSpec::Ground(_) | NodeSpec::Snow(_) => false,
+                NodeSpec::Cloth(_)
+                | NodeSpec::Ground(_)
+                | NodeSpec::Snow(_)
+                | NodeSpec::Skin(_) => false,
                 NodeSpec::DistanceField(f) if f.interpolate => {
                     let NodeSpec::Voxelize(v) = &nodes[&f.boundary] else {
                         unreachable!("edges are typed")
@@ -205,6 +210,7 @@ impl Plan {
                         | NodeSpec::Cloth(_)
                         | NodeSpec::Ground(_)
                         | NodeSpec::Snow(_)
+                        | NodeSpec::Skin(_)
                 ) {
                     ('#', true, true)
                 } else if sc.interpolate {

@@ -79,6 +79,50 @@ pub enum NodeSpec {
     /// views' depth maps (a distance field for what no view resolves) (inputs: body and
     /// garment Mesh; output: the fitted garment as a Mesh).
     Drape(DrapeNode),
+    /// A mesh deformed by a rig (Tokoi's particle skinning with adaptive radii, or linear
+    /// blend or dual quaternion skinning) (input: the rest Mesh, or the rig's own binding;
+    /// output: the posed Mesh, for any mesh consumer).
+    Skin(SkinNode),
+}
+
+/// The Skin node: which mesh, which rig, which method.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkinNode {
+    /// The Mesh node in the rig's rest pose (its first frame is taken as the rest). Leave it
+    /// out to load the OBJ the rig file binds (`mesh:` in the rig).
+    #[serde(default)]
+    pub mesh: Option<String>,
+    /// The rig file (RON: bones, binding, animation), relative to the pipeline file.
+    pub rig: String,
+    /// `Particles(...)` (T, default parameters suit a limb of radius ~0.1 m),
+    /// `Linear(...)` or `DualQuaternion(...)`.
+    pub method: SkinMethod,
+    /// Added to the output's positions (to stand several methods side by side), m.
+    #[serde(default)]
+    pub offset: (f32, f32, f32),
+    #[serde(default)]
+    pub backend: Option<Backend>,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+}
+
+/// How a Skin node deforms its mesh.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum SkinMethod {
+    /// Tokoi's particle skinning: `imprint_stages::skin::particles::ParticleParams`.
+    Particles(#[serde(default)] imprint_stages::skin::particles::ParticleParams),
+    /// Linear blend skinning with automatic weights.
+    Linear {
+        #[serde(default)]
+        weights: imprint_stages::skin::weights::WeightMethod,
+    },
+    /// Dual quaternion skinning with automatic weights.
+    DualQuaternion {
+        #[serde(default)]
+        weights: imprint_stages::skin::weights::WeightMethod,
+    },
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -633,6 +677,7 @@ impl NodeSpec {
             NodeSpec::Ground(_) => "Ground",
             NodeSpec::Snow(_) => "Snow",
             NodeSpec::Drape(_) => "Drape",
+            NodeSpec::Skin(_) => "Skin",
         }
     }
 
@@ -664,6 +709,11 @@ impl NodeSpec {
                         .iter()
                         .map(|a| ("accumulate", a.as_str(), PortType::HeightField)),
                 )
+                .collect(),
+            NodeSpec::Skin(k) => k
+                .mesh
+                .iter()
+                .map(|m| ("mesh", m.as_str(), PortType::Mesh))
                 .collect(),
             NodeSpec::Drape(d) => vec![
                 ("body", &d.body, PortType::Mesh),
@@ -700,7 +750,7 @@ impl NodeSpec {
             NodeSpec::Cloth(_) => Some(PortType::Mesh),
             NodeSpec::Heightmap(_) | NodeSpec::Ground(_) => Some(PortType::HeightField),
             NodeSpec::Snow(n) if n.ground.is_some() => Some(PortType::HeightField),
-            NodeSpec::Snow(_) | NodeSpec::Drape(_) => Some(PortType::Mesh),
+            NodeSpec::Snow(_) | NodeSpec::Drape(_) | NodeSpec::Skin(_) => Some(PortType::Mesh),
             NodeSpec::WriteField(_)
             | NodeSpec::WriteMesh(_)
             | NodeSpec::WriteHeightmap(_)
@@ -738,6 +788,7 @@ impl NodeSpec {
             NodeSpec::Ground(g) => g.backend,
             NodeSpec::Snow(n) => n.backend,
             NodeSpec::Drape(d) => d.backend,
+            NodeSpec::Skin(k) => k.backend,
             _ => None,
         }
     }
