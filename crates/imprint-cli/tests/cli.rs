@@ -1066,9 +1066,9 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
         "particles": Skin(mesh: "limb", rig: "twist.ron", method: Particles()),
         "bent": Skin(mesh: "limb", rig: "bend.ron", method: Linear()),
         "top": Heightmap(mesh: "bent", grid: Explicit(origin: (-0.2, -0.2), cell: 0.01, dims: (90, 40)), empty: -1.0),
-        "obj": WriteMesh(mesh: "dqs", every: 100),
+        "obj": WriteMesh(mesh: "dqs", every: 35),
         "obj_p": WriteMesh(mesh: "particles", every: 100),
-        "obj_l": WriteMesh(mesh: "lbs", every: 100),
+        "obj_l": WriteMesh(mesh: "lbs", every: 35),
         "hm": WriteHeightmap(heights: "top", formats: [Npy], every: 100),"#
     );
     let c = case_timed(&nodes, "frames: 36, fps: 24");
@@ -1159,4 +1159,28 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
         err.contains("twist.ron:4:") && err.contains("uper"),
         "{err}"
     );
+    // The blends on the GPU (lavapipe in CI): the same twisted limbs to f32 rounding.
+    std::fs::write(
+        dir.join("twist.ron"),
+        rig(r#"Twist(bone: "lower", degrees: 180, start: 0.0, duration: 0.5)"#),
+    )
+    .unwrap();
+    if !run_gpu_or_skip(c.file.to_str().unwrap(), "gpu", dir) {
+        return;
+    }
+    let gpu_report = read_json(&dir.join("gpu/report.json"));
+    for (n, file) in [("dqs", "obj/dqs_0035.obj"), ("lbs", "obj_l/lbs_0035.obj")] {
+        assert_eq!(gpu_report["nodes"][n]["backend"], "gpu");
+        let a = imprint_core::Mesh::load_obj(&dir.join("o").join(file)).unwrap();
+        let b = imprint_core::Mesh::load_obj(&dir.join("gpu").join(file)).unwrap();
+        let worst = a
+            .positions
+            .iter()
+            .zip(&b.positions)
+            .map(|(p, q)| (*p - *q).length())
+            .fold(0f32, f32::max);
+        eprintln!("{n}: GPU − CPU at most {worst:.2e} m");
+        assert!(worst < 1e-5, "{n}: GPU and CPU differ by {worst}");
+    }
+    assert_eq!(gpu_report["nodes"]["particles"]["backend"], "cpu");
 }

@@ -242,6 +242,7 @@ pub fn run_observed(
             | Stage::Drape { gpu, .. } => gpu.is_some(),
             Stage::Render { gpu, .. } => gpu.is_some(),
             Stage::Cloth { gpu, .. } => gpu.is_some(),
+            Stage::Skin { stage, .. } => stage.on_gpu(),
             _ => false,
         };
         report.nodes.insert(
@@ -1523,10 +1524,23 @@ fn build_stages(
                     every: w.every,
                 }
             }
-            NodeSpec::Skin(k) => Stage::Skin {
-                input: k.mesh.clone(),
-                stage: Box::new(crate::skin_stage::SkinStage::new(name, k, &plan.base_dir)?),
-            },
+            NodeSpec::Skin(k) => {
+                let particles = matches!(k.method, crate::schema::SkinMethod::Particles(_));
+                let ctx = if !particles && choose_gpu(want, name, gpu)? {
+                    *gpu
+                } else {
+                    None
+                };
+                Stage::Skin {
+                    input: k.mesh.clone(),
+                    stage: Box::new(crate::skin_stage::SkinStage::new(
+                        name,
+                        k,
+                        &plan.base_dir,
+                        ctx,
+                    )?),
+                }
+            }
             NodeSpec::Drape(d) => Stage::Drape {
                 body: d.body.clone(),
                 garment: d.garment.clone(),

@@ -774,7 +774,7 @@ impl NodeSpec {
                 | NodeSpec::Ground(_)
                 | NodeSpec::Snow(_)
                 | NodeSpec::Drape(_)
-        )
+        ) || matches!(self, NodeSpec::Skin(k) if !matches!(k.method, SkinMethod::Particles(_)))
     }
 
     /// The per-node backend override, for nodes that have two paths.

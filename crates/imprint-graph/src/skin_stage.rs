@@ -13,6 +13,8 @@
 use crate::schema::{SkinMethod, SkinNode};
 use glam::{Affine3A, Vec3};
 use imprint_core::{Error, Mesh, Result};
+use imprint_gpu::GpuContext;
+use imprint_stages::skin::gpu::{BlendMethod, GpuBlend};
 use imprint_stages::skin::particles::ParticleSkin;
 use imprint_stages::skin::rig::{Pose, Rig};
 use imprint_stages::skin::weights::{self, Weights};
@@ -34,16 +36,28 @@ pub struct SkinStage {
     last_skin: Option<Vec<Affine3A>>,
     /// The rest volume and joint sections.
     rest_measures: Option<(f64, Vec<f64>)>,
+    /// The GPU the blends run on, when the node runs on the GPU.
+    gpu: Option<&'static GpuContext>,
 }
 
 enum State {
-    Blend { weights: Weights, dual: bool },
+    Blend {
+        weights: Weights,
+        dual: bool,
+        gpu: Option<Box<GpuBlend>>,
+    },
     Particles(Box<ParticleSkin>),
 }
 
 impl SkinStage {
-    /// Loads the rig (and the mesh it binds, when the node names none).
-    pub fn new(name: &str, node: &SkinNode, base_dir: &Path) -> crate::Result<Self> {
+    /// Loads the rig (and the mesh it binds, when the node names none). With `gpu`, the blends
+    /// run there (particle skinning runs on the CPU).
+    pub fn new(
+        name: &str,
+        node: &SkinNode,
+        base_dir: &Path,
+        gpu: Option<&'static GpuContext>,
+    ) -> crate::Result<Self> {
         let loaded = crate::rig::load(&base_dir.join(&node.rig))?;
         let rest = match (&node.mesh, &loaded.mesh) {
             (None, Some(path)) => Some(Arc::new(Mesh::load_obj(path)?)),
@@ -58,7 +72,13 @@ impl SkinStage {
             state: None,
             last_skin: None,
             rest_measures: None,
+            gpu: gpu.filter(|_| !matches!(node.method, SkinMethod::Particles(_))),
         })
+    }
+
+    /// Whether the node's work runs on the GPU.
+    pub fn on_gpu(&self) -> bool {
+        self.gpu.is_some()
     }
 
     /// The posed mesh at `time` (the frame's end) and the frame's metrics. `input` is the
@@ -90,11 +110,18 @@ impl SkinStage {
         let pose = self.rig.pose(time);
         let mut metrics = Map::new();
         let mut mesh = match self.state.as_mut().expect("built above") {
-            State::Blend { weights, dual } => {
-                let positions = if *dual {
-                    blend::dqs(&rest.positions, weights, &pose.skin)
-                } else {
-                    blend::lbs(&rest.positions, weights, &pose.skin)
+            State::Blend { weights, dual, gpu } => {
+                let positions = match (self.gpu, gpu) {
+                    (Some(ctx), Some(g)) => {
+                        let method = if *dual {
+                            BlendMethod::DualQuaternion
+                        } else {
+                            BlendMethod::Linear
+                        };
+                        g.skin(ctx, method, &pose.skin)?
+                    }
+                    _ if *dual => blend::dqs(&rest.positions, weights, &pose.skin),
+                    _ => blend::lbs(&rest.positions, weights, &pose.skin),
                 };
                 let mut m = (*rest).clone();
                 m.positions = positions;
@@ -154,9 +181,20 @@ impl SkinStage {
         let segments = self.rig.rest_segments();
         Ok(match &self.method {
             SkinMethod::Linear { weights: w } | SkinMethod::DualQuaternion { weights: w } => {
+                let weights = weights::automatic(&rest.positions, &segments, w);
+                let gpu = match self.gpu {
+                    Some(ctx) => Some(Box::new(GpuBlend::new(
+                        ctx,
+                        &rest.positions,
+                        &weights,
+                        segments.len(),
+                    )?)),
+                    None => None,
+                };
                 State::Blend {
-                    weights: weights::automatic(&rest.positions, &segments, w),
+                    weights,
                     dual: matches!(self.method, SkinMethod::DualQuaternion { .. }),
+                    gpu,
                 }
             }
             SkinMethod::Particles(p) => State::Particles(Box::new(

@@ -43,8 +43,9 @@ pub fn lbs(rest: &[Vec3], weights: &Weights, skin: &[Affine3A]) -> Vec<Vec3> {
         .collect()
 }
 
-/// A rigid transform as a unit dual quaternion (real, dual).
-fn dual_quat(m: &DAffine3) -> (DQuat, DQuat) {
+/// A rigid transform as a unit dual quaternion (real, dual), in f64 (the GPU path rounds
+/// these to f32, so both paths start from the same quaternions).
+pub(crate) fn dual_quat(m: &DAffine3) -> (DQuat, DQuat) {
     let q = DQuat::from_mat3(&m.matrix3).normalize();
     let t = m.translation;
     let d = DQuat::from_xyzw(t.x, t.y, t.z, 0.0) * q * 0.5;

@@ -214,7 +214,7 @@ impl GpuBlend {
                 ]
             })),
             BlendMethod::DualQuaternion => self.records.extend(skin.iter().map(|m| {
-                let (r, d) = dual_quat(m);
+                let (r, d) = super::blend::dual_quat(&m.as_daffine3());
                 let q = |q: DQuat| [q.x as f32, q.y as f32, q.z as f32, q.w as f32];
                 [q(r), q(d), [0.0; 4], [0.0; 4]]
             })),
@@ -271,12 +271,3 @@ impl GpuBlend {
     }
 }
 
-/// A rigid transform as a unit dual quaternion (real, dual), in f64: the rotation of the 3x3
-/// part, normalised, and ½ t q (what [`dqs`](super::blend::dqs) uses, so both paths start
-/// from the same quaternions before the GPU's are rounded to f32).
-fn dual_quat(m: &Affine3A) -> (DQuat, DQuat) {
-    let m = m.as_daffine3();
-    let q = DQuat::from_mat3(&m.matrix3).normalize();
-    let t = m.translation;
-    (q, DQuat::from_xyzw(t.x, t.y, t.z, 0.0) * q * 0.5)
-}
