@@ -1,10 +1,12 @@
 //! Shared pieces of the benchmark harness: timing, machine description, baselines, GPU table.
 
 pub mod cloth;
+pub mod colliders;
 pub mod drape;
 pub mod ground_snow;
 pub mod render;
 pub mod schedule;
+pub mod skin;
 
 use imprint_core::{DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;

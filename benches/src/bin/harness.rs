@@ -23,7 +23,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 8] = [
+const SECTIONS: [(&str, &str); 10] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -38,6 +38,11 @@ const SECTIONS: [(&str, &str); 8] = [
     ("schedule", "schedules: H Table 1 columns (c) and (d)"),
     ("ground", "the ground and snow stages"),
     ("drape", "depth-buffer draping"),
+    (
+        "colliders",
+        "the cloth's colliders: distance field and depth maps",
+    ),
+    ("skin", "skinning: particles, LBS and DQS"),
 ];
 
 fn main() {
@@ -89,6 +94,8 @@ fn main() {
             "schedule" => imprint_benches::schedule::section(&root, repeat),
             "ground" => imprint_benches::ground_snow::section(&root, repeat),
             "drape" => imprint_benches::drape::section(&root, repeat),
+            "colliders" => imprint_benches::colliders::section(&root, repeat),
+            "skin" => imprint_benches::skin::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(

@@ -128,16 +128,6 @@ pub struct Fill {
     pub report: FillReport,
 }
 
-/// The volume a closed, outward-wound mesh encloses (signed sum of tetrahedra, f64).
-pub fn mesh_volume(mesh: &Mesh) -> f64 {
-    (0..mesh.triangles.len())
-        .map(|t| {
-            let [a, b, c] = mesh.triangle(t).map(|v| v.as_dvec3());
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
-}
-
 /// One root cube's kept particles (position, level) and whole cubes per level.
 type RootCubes = (Vec<(Vec3, u8)>, Vec<u64>);
 
@@ -246,7 +236,7 @@ pub fn fill(mesh: &Mesh, params: &FillParams) -> Result<Fill> {
         per_level,
         radii: radii_per_level,
         particle_volume,
-        mesh_volume: mesh_volume(mesh),
+        mesh_volume: super::measure::volume(mesh),
     };
     Ok(Fill {
         positions,
