@@ -14,7 +14,8 @@
 //! "surface" can be the far side of another part, and the vertex jumps through it.
 //!
 //! **Where T is thin, our choices.**
-//! - *The maps.* Per view, two square `resolution`² maps from
+//! - *The maps.* Per view line (opposite directions give the same pair of maps, so T's
+//!   three views render four), two square `resolution`² maps from
 //!   [`crate::snow::arrival::snow_camera`] (the body's box with a texel to spare), rendered by
 //!   `imprint_core::raster` with both faces drawn (no culling), so the first surface from each
 //!   side whatever the winding.
@@ -30,12 +31,19 @@
 //!   outside). Only vertices inside by this test move: a vertex outside the body moves by
 //!   exactly 0, even where T's test would call it inside (in a gap between two layers). The test assumes a closed body; for an open one "inside"
 //!   means little and neither do the counts. (The distance field cannot say it: it is
-//!   unsigned.)
-//! - *Resolved.* An inside vertex is resolved by the views when its shortest view push leaves
-//!   the body cleanly: sampled every half texel along the straight path to half a texel past
-//!   the pushed point, the samples are never inside again once they have been outside, and
-//!   the last one is outside. So a push that jumps through a gap and another part of the body
-//!   (T's chest) is not a resolution, nor one that stays inside.
+//!   unsigned.) The drape builds the test without its far-cell grid
+//!   ([`InsideTest::rays_only`]): the garment lies near the surface, where the grid seldom
+//!   answers.
+//! - *Resolved.* An inside vertex is resolved by the views when its shortest view push
+//!   leaves the body cleanly: the straight path to half a texel past the pushed point crosses
+//!   the surface once and ends outside (by the inside test). For a push along an axis (the
+//!   default views') the crossings are exact: those of the inside test's ray along that axis,
+//!   where crossings closer than 10⁻³ texel (or 8 f32 ulps of the coordinates) are one place
+//!   and cancel in pairs (a face two touching pieces share is crossed twice: no change). Where
+//!   that ray disagrees with the test's vote at the vertex, and for other directions, the path
+//!   is sampled every half texel instead: never inside again once outside, the last sample
+//!   outside (gaps thinner than half a texel are not seen). So a push that jumps through a gap
+//!   and another part of the body (T's chest) is not a resolution, nor one that stays inside.
 //! - *Unresolved.* An inside vertex no view resolves: no view sees it inside (its texel
 //!   uncovered at a silhouette, or the vertex less than about a texel deep, in front of the
 //!   surface its texel centre sees), or the shortest push stays inside or tunnels. Unresolved
@@ -56,10 +64,12 @@
 //! along a view axis, not along the normal, so near a silhouette of the chosen view a
 //! vertex lands well away from where a radial (closest-point) projection would put it.
 //!
-//! **Cost.** Per call: 2 renders per view, the inside test's binning (O(triangles)), then per
-//! garment vertex an inside test (three short triangle lists); per inside vertex one lookup
-//! per view and the clean-exit check, O(push length / texel) inside tests. The field is built
-//! only when the fallback is on and some vertex needs it.
+//! **Cost.** Per call: 2 renders per distinct view line, with the inside test's three axis
+//! bins (O(triangles)) built alongside; per garment vertex an inside test (three short
+//! triangle lists); per inside vertex one lookup per view and the clean-exit check: for an
+//! axis push one more walk of a triangle list and at most two at the end, else O(push length
+//! / texel) inside tests. The field is built only when the fallback is on and some vertex
+//! needs it.
 //!
 //! **Determinism.** Every vertex is decided on its own from the maps and the mesh; counts and
 //! the maximum are gathered in vertex order: the result is the same on any thread count.
