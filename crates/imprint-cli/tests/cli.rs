@@ -1184,3 +1184,28 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
     }
     assert_eq!(gpu_report["nodes"]["particles"]["backend"], "cpu");
 }
+
+/// A Skin node whose rig file is missing, or whose particles are asked to run on the GPU, is
+/// refused before anything runs, naming the node and the field.
+#[test]
+fn skin_node_input_errors_name_the_field() {
+    let limb = r#"        "limb": Mesh(primitive: Cylinder(radius: 0.1, length: 1.0)),"#;
+    expect_invalid(
+        &format!(
+            "{limb}\n        \"s\": Skin(mesh: \"limb\", rig: \"missing.ron\", method: Linear()),\n        \"o\": WriteMesh(mesh: \"s\"),"
+        ),
+        &["'s'", "rig file not found", "missing.ron"],
+    );
+    let c = case(&format!(
+        "{limb}\n        \"s\": Skin(mesh: \"limb\", rig: \"r.ron\", method: Particles(), backend: Gpu),\n        \"o\": WriteMesh(mesh: \"s\"),"
+    ));
+    std::fs::write(
+        c.dir.path().join("r.ron"),
+        r#"Rig(bones: [(name: "a", head: (0, 0, 0), tail: (1, 0, 0))])"#,
+    )
+    .unwrap();
+    let out = imprint(&["check", c.file.to_str().unwrap()], c.dir.path());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("backend") && err.contains("CPU"), "{err}");
+}
