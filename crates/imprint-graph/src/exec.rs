@@ -663,7 +663,7 @@ pub fn run_observed(
                         _ => unreachable!("edges are typed"),
                     });
                     let (mesh, m) = stage
-                        .frame(mesh_in.as_ref(), frame, time, 1.0 / plan.file.fps)
+                        .frame(mesh_in.as_ref(), frame, plan.file.fps)
                         .map_err(|e| at_node(e, name, frame))?;
                     if first_run {
                         for (k, v) in stage.summary() {

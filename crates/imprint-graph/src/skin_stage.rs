@@ -81,15 +81,15 @@ impl SkinStage {
         self.gpu.is_some()
     }
 
-    /// The posed mesh at `time` (the frame's end) and the frame's metrics. `input` is the
-    /// node's Mesh input, if it has one (read on the first frame only: the rest pose).
+    /// The posed mesh at frame `frame` (time `frame / fps`) and the frame's metrics. `input`
+    /// is the node's Mesh input, if it has one (read on the first frame only: the rest pose).
     pub fn frame(
         &mut self,
         input: Option<&Arc<Mesh>>,
         frame: u32,
-        time: f32,
-        dt_frame: f32,
+        fps: f32,
     ) -> Result<(Mesh, Value)> {
+        let (time, dt_frame) = (frame as f32 / fps, 1.0 / fps);
         let rest = match (&self.rest, input) {
             (Some(r), _) => r.clone(),
             (None, Some(m)) => {
@@ -129,6 +129,17 @@ impl SkinStage {
                 m
             }
             State::Particles(sim) => {
+                // A run that starts after frame 0 first replays the frames before it: the
+                // particles' state is their history (so the frame is the whole run's, to the
+                // bit, and does not start from rest against a pose far from it).
+                if self.last_skin.is_none() {
+                    for k in 0..frame {
+                        let p = self.rig.pose(k as f32 / fps).skin;
+                        let start = self.last_skin.take().unwrap_or_else(|| p.clone());
+                        sim.step_frame(&start, &p, k, dt_frame)?;
+                        self.last_skin = Some(p);
+                    }
+                }
                 let start = self.last_skin.as_deref().unwrap_or(&pose.skin);
                 let m = sim.step_frame(start, &pose.skin, frame, dt_frame)?;
                 if let Value::Object(o) = serde_json::to_value(m).expect("plain data") {
