@@ -71,18 +71,25 @@
 //! near the surface).
 //!
 //! **Cost.** Per substep three passes over the particles: rotations and volume change
-//! (corotated springs or pressure only), the forces (about 10 neighbours each), and the
-//! update; per frame O(vertices × 4) for the mesh (plus one rotation round per particle with
-//! [`VertexRotation::Particle`]). Positions, velocities and rotations are SIMD-aligned
-//! (`Vec3A`, `Mat3A`) in the loops. Memory O(particles × neighbours). Measured (test
-//! `frame_cost_at_5k_particles_and_10k_vertices`) on the 2-core machine while another
-//! build ran, so upper bounds: 5.2k particles, 10k vertices: 12–21 ms per frame with the
-//! defaults (18 substeps), 9–14 ms with T's set (24 substeps), vertices under 1 ms. Not yet
-//! the 8 ms goal. Fitting the rotations inside the force pass (one substep late) would save
-//! the first pass but made the defaults unstable at 18 substeps.
+//! (corotated springs or pressure only); the pair forces (about 10 neighbours each), each
+//! pair computed once, at its lower-index end (its term is exactly antisymmetric, so the
+//! other end takes it negated, bit for bit; the pressure's ½kv(J_i + J_j) − kv is summed
+//! in that symmetric order, a reassociation of the former per-end sum); and a gather of
+//! those in list order (with the bone's pull, its target carried from the last substep's
+//! end) fused with the update. Per frame O(vertices × 4) for the mesh (plus one rotation
+//! round per particle with [`VertexRotation::Particle`]). Positions, velocities and
+//! rotations are SIMD-aligned (`Vec3A`, `Mat3A`) in the loops. Memory O(particles ×
+//! neighbours). Measured (test `frame_cost_at_5k_particles_and_10k_vertices`) on the 2-core
+//! machine while another build ran (load 2), so upper bounds: 5.2k particles, 10k
+//! vertices: 11–12.5 ms per frame with the defaults (18 substeps; 12.5–16 ms before the
+//! pairs were computed once), 7.5 ms with T's set (24 substeps; 11.6 ms before), vertices
+//! under 1 ms. Not yet the 8 ms goal with the defaults. Fitting the rotations inside the
+//! force pass (one substep late) would save the first pass but made the defaults unstable
+//! at 18 substeps.
 //!
-//! **Determinism.** Each particle's force is gathered from its own neighbour list in list
-//! order (no scatter, no atomics), every particle is written by one task, the rotation
+//! **Determinism.** Each pair's force is written once, by its lower end's task, into its own
+//! slot, and each particle gathers its pairs' forces in its neighbour list's order (no
+//! scatter, no atomics); every particle is written by one task, the rotation
 //! tracking runs a fixed number of rounds, and the blow-up check keeps the lowest failing
 //! index: bytes are the same on any thread count.
 
@@ -93,7 +100,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Particles per parallel task: fixed, so the work split never depends on the thread count.
-const CHUNK: usize = 512;
+const CHUNK: usize = 256;
 
 /// How a vertex's rest offset from each of its particles is turned.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -277,11 +284,21 @@ pub struct ParticleSkin {
     xa: Vec<Vec3A>,
     /// Velocities at the last half step.
     v: Vec<Vec3A>,
-    /// Accelerations of this step.
-    a_new: Vec<Vec3A>,
+    /// Each particle's bone target at the end of the last substep (the next one's start).
+    target: Vec<Vec3A>,
+    /// Per pair (i < j, numbered by i then list order): the force term of the pair on i
+    /// (before the mass weight), `−` of that on j.
+    pair_f: Vec<Vec3A>,
+    /// Per particle: the first of its pairs in `pair_f` (n + 1 entries), and the first
+    /// entry of its list with j > i (its own pairs, in list order).
+    pair_start: Vec<u32>,
+    upper: Vec<u32>,
+    /// Per neighbour entry: its pair's index in `pair_f`.
+    pair_of: Vec<u32>,
     /// The velocities at the step estimated for the next force pass, `v + (h/2) a`.
     ve: Vec<Vec3A>,
-    /// CSR neighbour lists: `nbr[start[i]..start[i+1]]`, with rest length and m_j / (m_i + m_j).
+    /// CSR neighbour lists: `nbr[start[i]..start[i+1]]`, with rest length and m_j / (m_i + m_j),
+    /// the latter negated where j < i (the entry's pair force is stored from j's end).
     start: Vec<u32>,
     nbr: Vec<u32>,
     rest_len: Vec<f32>,
@@ -358,11 +375,11 @@ impl ParticleSkin {
         let mut start = Vec::with_capacity(n + 1);
         let (mut nbr, mut rest_len, mut weight) = (Vec::new(), Vec::new(), Vec::new());
         start.push(0u32);
-        for l in &lists {
+        for (i, l) in lists.iter().enumerate() {
             for &(j, d, w) in l {
                 nbr.push(j);
                 rest_len.push(d);
-                weight.push(w);
+                weight.push(if j as usize > i { w } else { -w });
             }
             start.push(nbr.len() as u32);
         }
@@ -374,6 +391,32 @@ impl ParticleSkin {
                 (near, near.map(|j| p - positions[j as usize]))
             })
             .unzip();
+        // Each pair once, from its lower end: its number, and every entry's pair.
+        let upper: Vec<u32> = (0..n)
+            .map(|i| {
+                let l = &nbr[start[i] as usize..start[i + 1] as usize];
+                start[i] + l.partition_point(|&j| (j as usize) < i) as u32
+            })
+            .collect();
+        let mut pair_start = Vec::with_capacity(n + 1);
+        pair_start.push(0u32);
+        for i in 0..n {
+            pair_start.push(pair_start[i] + start[i + 1] - upper[i]);
+        }
+        let pair_of: Vec<u32> = (0..n)
+            .flat_map(|i| (start[i]..start[i + 1]).map(move |e| (i, e as usize)))
+            .map(|(i, e)| {
+                let j = nbr[e] as usize;
+                if j > i {
+                    pair_start[i] + (e as u32 - upper[i])
+                } else {
+                    // The entry for i in j's list (lists are sorted and symmetric).
+                    let l = &nbr[upper[j] as usize..start[j + 1] as usize];
+                    let k = l.binary_search(&(i as u32)).expect("symmetric neighbours");
+                    pair_start[j] + k as u32
+                }
+            })
+            .collect();
         let diag = rest.bounds().size().length();
         let xa: Vec<Vec3A> = positions.iter().map(|&p| p.into()).collect();
         let rest_off: Vec<Vec3A> = (0..n)
@@ -401,7 +444,11 @@ impl ParticleSkin {
             x: positions,
             xa,
             v: vec![Vec3A::ZERO; n],
-            a_new: vec![Vec3A::ZERO; n],
+            target: vec![Vec3A::ZERO; n],
+            pair_f: vec![Vec3A::ZERO; pair_start[n] as usize],
+            pair_start,
+            upper,
+            pair_of,
             ve: vec![Vec3A::ZERO; n],
             rest_off,
             start,
@@ -521,67 +568,77 @@ impl ParticleSkin {
                     std::mem::swap(&mut self.rot, &mut self.rot_new);
                 }
             }
-            // Pass 1: accelerations from x_n and the estimated v_n.
+            // Pass 1: each pair's force from x_n and the estimated v_n, once, from its lower
+            // end (the pair's term is exactly antisymmetric: negating both offsets negates
+            // every product, and the pressure's J̄ is summed symmetrically).
             {
                 let (hrot, jac) = (&self.half_rot, &self.jac);
-                let (x, ve, rest, bone) = (&self.xa, &self.ve, &self.rest, &self.bone);
-                let (st, nb, rl, wt, ro) = (
+                let (x, ve) = (&self.xa, &self.ve);
+                let (st, nb, rl, ro, up, ps) = (
                     &self.start,
                     &self.nbr,
                     &self.rest_len,
-                    &self.weight,
                     &self.rest_off,
+                    &self.upper,
+                    &self.pair_start,
                 );
-                self.a_new
-                    .par_chunks_mut(CHUNK)
-                    .enumerate()
-                    .for_each(|(c, out)| {
-                        for (k, o) in out.iter_mut().enumerate() {
-                            let i = c * CHUNK + k;
-                            let xi = x[i];
-                            let vi = ve[i];
-                            let mut acc = Vec3A::ZERO;
-                            let edges = st[i] as usize..st[i + 1] as usize;
-                            // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
-                            let pi = 0.5 * kv * jac[i] - kv;
-                            if corotated {
-                                let hri = hrot[i];
-                                for e in edges {
-                                    let j = nb[e] as usize;
-                                    let dx = x[j] - xi;
-                                    let d2 = dx.length_squared();
-                                    if d2 <= 0.0 {
-                                        continue;
-                                    }
-                                    let n = dx * d2.sqrt().recip();
-                                    // ½(R_i + R_j) (X_j − X_i).
-                                    let off = (hri + hrot[j]) * ro[e];
-                                    let p = pi + 0.5 * kv * jac[j];
-                                    let f =
-                                        ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(n)) * n;
-                                    acc += wt[e] * f;
+                let n = x.len();
+                let mut parts = Vec::with_capacity(n.div_ceil(CHUNK));
+                let mut tail: &mut [Vec3A] = &mut self.pair_f;
+                for lo in (0..n).step_by(CHUNK) {
+                    let hi = (lo + CHUNK).min(n);
+                    let (a, b) = std::mem::take(&mut tail).split_at_mut((ps[hi] - ps[lo]) as usize);
+                    parts.push(a);
+                    tail = b;
+                }
+                let hkv = 0.5 * kv;
+                parts.into_par_iter().enumerate().for_each(|(c, out)| {
+                    let lo = c * CHUNK;
+                    let mut o = out.iter_mut();
+                    for i in lo..(lo + CHUNK).min(n) {
+                        let xi = x[i];
+                        let vi = ve[i];
+                        let edges = up[i] as usize..st[i + 1] as usize;
+                        // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
+                        let pi = hkv * jac[i];
+                        if corotated {
+                            let hri = hrot[i];
+                            for e in edges {
+                                let f = o.next().expect("pair slot");
+                                let j = nb[e] as usize;
+                                let dx = x[j] - xi;
+                                let d2 = dx.length_squared();
+                                if d2 <= 0.0 {
+                                    *f = Vec3A::ZERO;
+                                    continue;
                                 }
-                            } else {
-                                for e in edges {
-                                    let j = nb[e] as usize;
-                                    let dx = x[j] - xi;
-                                    let d = dx.length();
-                                    if d <= 0.0 {
-                                        continue;
-                                    }
-                                    let n = dx / d;
-                                    let p = pi + 0.5 * kv * jac[j];
-                                    let f = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(n);
-                                    acc += wt[e] * (f * n + p * dx);
-                                }
+                                let nrm = dx * d2.sqrt().recip();
+                                // ½(R_i + R_j) (X_j − X_i).
+                                let off = (hri + hrot[j]) * ro[e];
+                                let p = (pi + hkv * jac[j]) - kv;
+                                *f = ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(nrm)) * nrm;
                             }
-                            let target = tf[bone[i] as usize].transform_point3a(rest[i].into());
-                            acc += kb * (target - xi) - cb * vi;
-                            *o = acc;
+                        } else {
+                            for e in edges {
+                                let f = o.next().expect("pair slot");
+                                let j = nb[e] as usize;
+                                let dx = x[j] - xi;
+                                let d = dx.length();
+                                if d <= 0.0 {
+                                    *f = Vec3A::ZERO;
+                                    continue;
+                                }
+                                let nrm = dx / d;
+                                let p = (pi + hkv * jac[j]) - kv;
+                                let s = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(nrm);
+                                *f = s * nrm + p * dx;
+                            }
                         }
-                    });
+                    }
+                });
             }
-            // Pass 2: leap-frog update and the blow-up check (lowest failing index).
+            // Pass 2: each particle gathers its pairs' forces (list order) and its bone's,
+            // then the leap-frog update and the blow-up check (lowest failing index).
             let limit = self.deviation_limit;
             let tf_next: Vec<Affine3A> = s0
                 .iter()
@@ -592,25 +649,39 @@ impl ParticleSkin {
                     Affine3A::from_rotation_translation(q0.slerp(q, u), t0.lerp(t1, u))
                 })
                 .collect();
-            let (rest, bone, a_new) = (&self.rest, &self.bone, &self.a_new);
+            let (rest, bone) = (&self.rest, &self.bone);
+            let (st, wt, po, pf) = (&self.start, &self.weight, &self.pair_of, &self.pair_f);
             let failed = self
                 .xa
                 .par_chunks_mut(CHUNK)
                 .zip(self.v.par_chunks_mut(CHUNK))
                 .zip(self.ve.par_chunks_mut(CHUNK))
+                .zip(self.target.par_chunks_mut(CHUNK))
                 .enumerate()
-                .map(|(c, ((xs, vs), ves))| {
+                .map(|(c, (((xs, vs), ves), tg))| {
                     let mut bad = None;
                     for k in 0..xs.len() {
                         let i = c * CHUNK + k;
-                        let an = a_new[i];
+                        let xi = xs[k];
+                        let mut acc = Vec3A::ZERO;
+                        for e in st[i] as usize..st[i + 1] as usize {
+                            // ±w f: the sign (j < i) is in the weight, exactly.
+                            acc += wt[e] * pf[po[e] as usize];
+                        }
+                        // The substep's start target: the last substep's end target (the
+                        // same transform, bit for bit) after the first.
+                        let target = if s == 0 {
+                            tf[bone[i] as usize].transform_point3a(rest[i].into())
+                        } else {
+                            tg[k]
+                        };
+                        let an = acc + (kb * (target - xi) - cb * ves[k]);
                         vs[k] += h * an;
                         xs[k] += h * vs[k];
                         ves[k] = vs[k] + (0.5 * h) * an;
+                        tg[k] = tf_next[bone[i] as usize].transform_point3a(rest[i].into());
                         if bad.is_none() {
-                            let target =
-                                tf_next[bone[i] as usize].transform_point3a(rest[i].into());
-                            let dev = xs[k].distance(target);
+                            let dev = xs[k].distance(tg[k]);
                             if dev.is_nan() || dev > limit || !vs[k].is_finite() {
                                 bad = Some((i, dev));
                             }
