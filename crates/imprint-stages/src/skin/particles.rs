@@ -603,9 +603,9 @@ impl ParticleSkin {
                         let pi = hkv * jac[i];
                         if corotated {
                             let hri = hrot[i];
-                            for e in edges {
-                                let f = o.next().expect("pair slot");
-                                let j = nb[e] as usize;
+                            let slots = o.by_ref().take(edges.len());
+                            for ((f, &j), &r) in slots.zip(&nb[edges.clone()]).zip(&ro[edges]) {
+                                let j = j as usize;
                                 let dx = x[j] - xi;
                                 let d2 = dx.length_squared();
                                 if d2 <= 0.0 {
@@ -614,7 +614,7 @@ impl ParticleSkin {
                                 }
                                 let nrm = dx * d2.sqrt().recip();
                                 // ½(R_i + R_j) (X_j − X_i).
-                                let off = (hri + hrot[j]) * ro[e];
+                                let off = (hri + hrot[j]) * r;
                                 let p = (pi + hkv * jac[j]) - kv;
                                 *f = ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(nrm)) * nrm;
                             }
@@ -664,9 +664,10 @@ impl ParticleSkin {
                         let i = c * CHUNK + k;
                         let xi = xs[k];
                         let mut acc = Vec3A::ZERO;
-                        for e in st[i] as usize..st[i + 1] as usize {
+                        let edges = st[i] as usize..st[i + 1] as usize;
+                        for (&w, &p) in wt[edges.clone()].iter().zip(&po[edges]) {
                             // ±w f: the sign (j < i) is in the weight, exactly.
-                            acc += wt[e] * pf[po[e] as usize];
+                            acc += w * pf[p as usize];
                         }
                         // The substep's start target: the last substep's end target (the
                         // same transform, bit for bit) after the first.
