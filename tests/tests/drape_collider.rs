@@ -142,7 +142,7 @@ fn curtain(per_substep: f32) -> (u32, f32, f32) {
 /// Motion along a view is exact in the blend; across a view it is not (the blend of two
 /// poses' depths is not the body in between). At ε/8 per substep (2 cm per frame, 0.13 of
 /// the sphere's radius) no particle enters the sphere; at ε/4 and ε/2 (4 and 8 cm per frame)
-/// a few are caught inside at the rim for a substep and pushed back out (measured: 3 and 8
+/// a few are caught inside at the rim for a substep and pushed back out (measured: 2 and 6
 /// particles at most); none is left inside.
 #[test]
 fn a_moving_sphere_carries_a_curtain_through_blended_maps() {
