@@ -15,6 +15,7 @@
 //!    overrides, then run stage by stage (the executor's calls, without its render and mesh
 //!    writer) to time mesh motion, voxelise, field and cloth per frame.
 
+use crate::median;
 use glam::{UVec3, Vec3};
 use imprint_core::{DistanceField, GridSpec};
 use imprint_graph::schema::{GridChoice, NodeSpec};
@@ -171,12 +172,6 @@ fn time_cells(field: &DistanceField) -> f64 {
     let t = Instant::now();
     std::hint::black_box(copy.cells());
     t.elapsed().as_secs_f64() * 1e3
-}
-
-/// Median (NaN for none).
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Runs `benches/compare/cloth_taichi.py` (found the way `baselines()` finds baselines.py:

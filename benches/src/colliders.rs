@@ -6,6 +6,7 @@
 //! `pipelines/cloth_colliders.ron`'s scene without the render: a 40 × 40 cloth (0.8 m)
 //! dropped on the cow (size 1), 24 substeps, ε = 8 mm, 48 frames at 24 fps.
 
+use crate::median;
 use glam::Vec3;
 use imprint_core::raster::rasterize_depth_with;
 use imprint_core::{BoundaryVariant, GridSpec, Mesh};
@@ -17,11 +18,6 @@ use std::time::Instant;
 
 const FRAMES: u32 = 48;
 const FPS: f32 = 24.0;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn cloth() -> ClothSim {
     let mut p = ClothParams::new(

@@ -6,17 +6,13 @@
 //! (the six and the eight cube diagonals). Reported: ms per drape (median), the share of
 //! inside vertices no view resolves, and with the distance-field fallback what is left.
 
+use crate::median;
 use glam::Vec3;
 use imprint_core::mesh::primitives::torus;
 use imprint_stages::drape::{DrapeParams, Fallback, drape_cpu};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
 
 pub fn section(_root: &Path, repeat: usize) -> String {
     let runs = repeat.clamp(1, 5);

@@ -7,6 +7,7 @@
 //! - Snow: one step (16 jittered depth maps at 512² + deposit + stabilisation) over a sphere
 //!   of 40,000 triangles on a 72² ground (49,762 triangles in all); goal ≤ 150 ms here.
 
+use crate::median;
 use glam::{Mat4, UVec2, Vec2, Vec3};
 use imprint_core::HeightField;
 use imprint_core::mesh::primitives::uv_sphere;
@@ -15,11 +16,6 @@ use imprint_stages::snow::{SnowParams, SnowSim};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
 
 pub fn section(_root: &Path, repeat: usize) -> String {
     let mut s = String::from("## 8. Ground and snow (CPU)\n\n");

@@ -7,6 +7,7 @@
 //! cloth's deviation from the every-frame run (per-frame particle distances, observed through
 //! `run_observed`) are reported; the goal is ≥ 4× with a deviation ≤ ε.
 
+use crate::median;
 use imprint_graph::exec::{Observed, Observer, RunOptions, run_observed};
 use imprint_graph::report::Report;
 use std::fmt::Write;
@@ -83,11 +84,6 @@ fn run(
     let report =
         run_observed(&plan, &opts, &mut |_, _| {}, Some(&mut cloth)).map_err(|e| e.to_string())?;
     Ok((report, cloth))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Mean over frames 1… (frame 0 builds everything cold), and the largest.

@@ -7,6 +7,7 @@
 //! at 24 fps for 60 frames. Particles: T's fill at a finest radius that gives about 5k
 //! particles, the default forces (beyond T) and T's own set.
 
+use crate::median;
 use glam::Vec3;
 use imprint_core::Mesh;
 use imprint_core::mesh::primitives::{cylinder, torus};
@@ -27,11 +28,6 @@ struct Outcome {
     ms: f64,
     volume: f64,
     section: f64,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// The joint's section (the plane through the lower bone's head halving the bend) and the
