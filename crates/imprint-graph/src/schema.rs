@@ -764,17 +764,22 @@ impl NodeSpec {
 
     /// Whether the node has a GPU path (the others always run on the CPU).
     pub fn has_gpu_path(&self) -> bool {
-        matches!(
-            self,
+        match self {
             NodeSpec::Voxelize(_)
-                | NodeSpec::DistanceField(_)
-                | NodeSpec::Heightmap(_)
-                | NodeSpec::Render(_)
-                | NodeSpec::Cloth(_)
-                | NodeSpec::Ground(_)
-                | NodeSpec::Snow(_)
-                | NodeSpec::Drape(_)
-        ) || matches!(self, NodeSpec::Skin(k) if !matches!(k.method, SkinMethod::Particles(_)))
+            | NodeSpec::DistanceField(_)
+            | NodeSpec::Heightmap(_)
+            | NodeSpec::Render(_)
+            | NodeSpec::Ground(_)
+            | NodeSpec::Snow(_)
+            | NodeSpec::Drape(_) => true,
+            // The GPU cloth reads distance fields only; particle skinning is CPU only.
+            NodeSpec::Cloth(c) => c.depth_colliders.is_empty(),
+            NodeSpec::Skin(k) => !matches!(k.method, SkinMethod::Particles(_)),
+            NodeSpec::Mesh(_)
+            | NodeSpec::WriteField(_)
+            | NodeSpec::WriteMesh(_)
+            | NodeSpec::WriteHeightmap(_) => false,
+        }
     }
 
     /// The per-node backend override, for nodes that have two paths.
