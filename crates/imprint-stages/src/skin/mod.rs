@@ -13,6 +13,7 @@
 pub mod blend;
 pub mod fill;
 pub mod gpu;
+pub mod gpu_particles;
 pub mod measure;
 pub mod particles;
 pub mod rig;

@@ -810,6 +810,39 @@ impl ParticleSkin {
     pub fn fill_report(&self) -> &FillReport {
         &self.report
     }
+
+    /// For the GPU path: the CSR lists (start, neighbour, rest length, signed mass weight),
+    /// the pairs' layout (first upper entry per particle, first pair slot per particle, each
+    /// entry's pair slot).
+    pub(crate) fn gpu_lists(&self) -> [&[u32]; 5] {
+        [
+            &self.start,
+            &self.nbr,
+            &self.upper,
+            &self.pair_start,
+            &self.pair_of,
+        ]
+    }
+
+    /// For the GPU path: per neighbour entry, the rest length and the signed mass weight.
+    pub(crate) fn gpu_edge_values(&self) -> (&[f32], &[f32]) {
+        (&self.rest_len, &self.weight)
+    }
+
+    /// For the GPU path: the substeps' positions, half-step velocities, estimated velocities.
+    pub(crate) fn gpu_state(&self) -> (&[Vec3A], &[Vec3A], &[Vec3A]) {
+        (&self.xa, &self.v, &self.ve)
+    }
+
+    /// For the GPU path: the blow-up distance, m.
+    pub(crate) fn gpu_deviation_limit(&self) -> f32 {
+        self.deviation_limit
+    }
+
+    /// For the GPU path: the number of bones.
+    pub(crate) fn gpu_bone_count(&self) -> usize {
+        self.bones
+    }
 }
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
