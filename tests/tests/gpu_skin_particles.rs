@@ -8,12 +8,14 @@
 //! the measured, headroom for a GPU that contracts differently). A GPU that dropped or
 //! mis-scaled a force would miss by far more: the test checks that a CPU run with the bone
 //! pull halved, or without pair or bone damping, lands at least 20× the tolerance away
-//! (measured 8e-2, 2.2e-3, 1.4e-1). Also: the refusal of the forces not yet on the GPU. Skips
+//! (measured 8e-2, 2.2e-3, 1.4e-1). The same with the defaults (corotated springs with the
+//! per-particle rotation fit, pressure: measured 1.2e-7 to 1.4e-7; without pressure or with
+//! the spring halved the CPU lands 1.3e-2 and 4.5e-2 away) and with distance springs plus
+//! pressure (measured up to 1.2e-7). Skips
 //! without a GPU adapter (`IMPRINT_REQUIRE_GPU=1` makes that a failure). Small scene: CI
 //! runs this on a software rasteriser (Mesa lavapipe).
 
 use glam::{Affine3A, Vec3};
-use imprint_core::Error;
 use imprint_gpu::test_context;
 use imprint_stages::skin::fill::FillParams;
 use imprint_stages::skin::gpu_particles::GpuParticleSkin;
@@ -125,16 +127,73 @@ fn gpu_particles_match_the_cpu_through_a_bend() {
     }
 }
 
-#[test]
-fn gpu_particles_refuse_forces_not_yet_ported() {
-    let Some(ctx) = test_context() else { return };
+/// The GPU against the CPU through the same bend; returns the largest difference.
+fn compare(ctx: &imprint_gpu::GpuContext, name: &str, params: &ParticleParams) -> f32 {
     let (mesh, rig) = two_bone_limb(R, LEN, 16, 10);
-    let params = ParticleParams {
-        fill: coarse_t().fill,
+    let pose = |f: u32| bend(&rig, 90.0 * (f.min(6) as f32 / 6.0)).skin;
+    let mut cpu = ParticleSkin::new(&mesh, &rig.rest_segments(), params).unwrap();
+    let mut gpu = GpuParticleSkin::new(ctx, &cpu).unwrap();
+    let cpu_frames = cpu_run(&mut cpu, &pose);
+    let mut worst = 0.0f32;
+    for (f, want) in cpu_frames.iter().enumerate() {
+        let f = f as u32;
+        gpu.step_frame(ctx, &pose(f), &pose(f + 1), f, DT).unwrap();
+        let err = max_diff(&gpu.read_positions(ctx).unwrap(), want);
+        println!("{name}, frame {f:>2}: max |GPU - CPU| = {err:.2e}");
+        worst = worst.max(err);
+    }
+    println!("{name}: worst {worst:.2e}");
+    worst
+}
+
+/// The defaults (corotated springs with per-particle rotations, pressure), and distance
+/// springs with pressure: the rotation fit and the volume change run on the GPU too.
+#[test]
+fn gpu_particles_match_the_cpu_with_rotations_and_pressure() {
+    let Some(ctx) = test_context() else { return };
+    let fill = coarse_t().fill;
+    let defaults = ParticleParams {
+        fill: fill.clone(),
         ..Default::default()
     };
-    let cpu = ParticleSkin::new(&mesh, &rig.rest_segments(), &params).unwrap();
-    let err = GpuParticleSkin::new(ctx, &cpu).unwrap_err();
-    assert!(matches!(err, Error::Invalid(_)), "{err}");
-    assert!(err.to_string().contains("Distance"), "{err}");
+    let err = compare(ctx, "defaults", &defaults);
+    assert!(err <= TOL * R, "defaults: {err}");
+    // A GPU without the pressure or with a mis-scaled corotated spring would fail: on the
+    // CPU those land far beyond the tolerance. (Distance springs in the corotated ones'
+    // place blow up at the defaults' step, on the CPU too, so cannot be compared.)
+    let (mesh, rig) = two_bone_limb(R, LEN, 16, 10);
+    let pose = |f: u32| bend(&rig, 90.0 * (f.min(6) as f32 / 6.0)).skin;
+    let mut reference = ParticleSkin::new(&mesh, &rig.rest_segments(), &defaults).unwrap();
+    let want = cpu_run(&mut reference, &pose);
+    for (name, params) in [
+        (
+            "no pressure",
+            ParticleParams {
+                volume_stiffness: 0.0,
+                ..defaults.clone()
+            },
+        ),
+        (
+            "spring stiffness halved",
+            ParticleParams {
+                stiffness: 0.5 * defaults.stiffness,
+                ..defaults.clone()
+            },
+        ),
+    ] {
+        let mut other = ParticleSkin::new(&mesh, &rig.rest_segments(), &params).unwrap();
+        let d = cpu_run(&mut other, &pose)
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| max_diff(a, b))
+            .fold(0.0, f32::max);
+        println!("CPU defaults with {name}: max difference from the reference {d:.2e}");
+        assert!(d > 20.0 * TOL * R, "{name}: only {d}");
+    }
+    let distance_pressure = ParticleParams {
+        volume_stiffness: 2000.0,
+        ..coarse_t()
+    };
+    let err = compare(ctx, "T + pressure", &distance_pressure);
+    assert!(err <= TOL * R, "T + pressure: {err}");
 }

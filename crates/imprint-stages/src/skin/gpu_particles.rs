@@ -5,32 +5,39 @@
 //! - **Once** ([`GpuParticleSkin::new`]): the CPU simulator's fixed data (CSR neighbour lists
 //!   with rest lengths and signed mass weights, each entry's pair slot, each particle's first
 //!   upper entry and first pair slot, rest positions, bones) and its state (positions,
-//!   half-step velocities, estimated step velocities) are uploaded, the two pipelines made,
-//!   and one bind group per substep (each with its own substep-number uniform).
+//!   half-step velocities, estimated step velocities, and the tracked rotations and volume
+//!   changes) are uploaded, the pipelines made, and one bind group per substep for the
+//!   update (each with its own substep-number uniform).
 //! - **Per frame** ([`GpuParticleSkin::step_frame`]): the CPU computes the bones' transforms
 //!   at every substep boundary (rotation slerped, translation lerped: the same glam code as
 //!   the CPU path, so the same f32 transforms) and uploads them in one write of
-//!   (substeps + 1) × bones × 64 bytes; then one submission of 2 dispatches per substep:
-//!   `pairs` (each pair's force once, from its lower end) and `update` (gather in list order,
-//!   bone pull and damping, leap-frog, blow-up check). The blow-up flag (lowest failing
+//!   (substeps + 1) × bones × 64 bytes; then one submission of 2 or 3 dispatches per substep,
+//!   the CPU's passes: `rotate` (corotated springs or pressure only: each particle's rotation,
+//!   one round of the iteration from its last one, and its volume change det A / det B),
+//!   `pairs` / `pairs_corotated` (each pair's force once, from its lower end) and `update`
+//!   (gather in list order, bone pull and damping, leap-frog, blow-up check). The blow-up flag (lowest failing
 //!   particle, first failing substep) is read back at the frame's end: one 8-byte read.
 //! - **Read-back** ([`GpuParticleSkin::read_positions`]) only when asked.
 //!
-//! Supported: T's forces ([`Spring::Distance`], `volume_stiffness` 0). The corotated springs
-//! and the pressure (the per-particle rotation fit and volume change) are not yet on the GPU;
-//! [`GpuParticleSkin::new`] refuses them. Vertices are not computed here: read the particles
-//! back and use the CPU's vertex rule.
+//! Supported: every force of the CPU path ([`Spring::Distance`] and [`Spring::Corotated`],
+//! with or without pressure). Not here: the vertices (read the particles back and use the
+//! CPU's vertex rule; the GPU's tracked rotations are not read back, so
+//! `VertexRotation::Particle` needs the CPU's own rotation fit), the frame metrics, and the
+//! state going back into the CPU's [`ParticleSkin`] (the GPU copy runs on its own). The
+//! blow-up check reports the lowest failing particle over the frame and the first failing
+//! substep (the CPU: the first substep's lowest), without the distance.
 //!
 //! Precision: f32 on both sides; the same operations per pair and per particle in the same
 //! order, so differences come from contraction (fused multiply-adds) and the GPU's `length`
-//! and division. Measured on lavapipe (two-bone limb, 378 particles, T's set, 90° bend over 6
-//! frames then held): max |GPU − CPU| per particle 6e-8 to 1.2e-7 m per frame, not growing
-//! (the motion is damped).
+//! and division. Measured on lavapipe (two-bone limb, 378 particles, 90° bend over 6 frames
+//! then held): max |GPU − CPU| per particle 6e-8 to 1.2e-7 m per frame with T's set,
+//! 1.2e-7 to 1.4e-7 with the defaults (corotated springs, pressure), not growing (the motion
+//! is damped).
 //!
 //! Cost: per substep two dispatches of ⌈particles / 64⌉ workgroups; per frame one upload of
 //! the substeps' bone transforms and an 8-byte read-back. GPU memory: 48 bytes per particle
-//! state, 48 per particle of fixed data, 16 per neighbour entry, 16 per pair, 64 per bone
-//! and substep.
+//! state, 48 per particle of fixed data, 64 per particle rotation, 32 per neighbour entry,
+//! 16 per pair, 64 per bone and substep.
 
 use super::particles::{ParticleSkin, Spring};
 use glam::{Affine3A, Quat, Vec3, Vec3A};
@@ -48,6 +55,9 @@ struct Params {
     kb: f32,
     cb: f32,
     limit: f32,
+    kv: f32,
+    corotated: u32,
+    _pad: [u32; 2],
 }
 
 #[repr(C)]
@@ -80,6 +90,16 @@ struct Edge {
     pair: u32,
     rest_len: f32,
     weight: f32,
+    off: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Rot {
+    q: [f32; 4],
+    hx: [f32; 4],
+    hy: [f32; 4],
+    hz: [f32; 4],
 }
 
 type TfRecord = [[f32; 4]; 4];
@@ -96,6 +116,8 @@ pub struct GpuParticleSkin {
     tfs: wgpu::Buffer,
     bad: wgpu::Buffer,
     pairs: (wgpu::ComputePipeline, wgpu::BindGroup),
+    /// Pass 0 (rotations and volume change), with corotated springs or pressure only.
+    rotate: Option<(wgpu::ComputePipeline, wgpu::BindGroup)>,
     update: wgpu::ComputePipeline,
     /// One per substep (its `Step` uniform differs).
     update_binds: Vec<wgpu::BindGroup>,
@@ -107,18 +129,12 @@ fn v4(v: Vec3A) -> [f32; 4] {
 }
 
 impl GpuParticleSkin {
-    /// Uploads `skin`'s fixed data and current state. Refuses what the GPU path does not do
-    /// yet: corotated springs and pressure.
+    /// Uploads `skin`'s fixed data and current state (a copy: the GPU then runs on its own).
     pub fn new(ctx: &GpuContext, skin: &ParticleSkin) -> Result<Self> {
         let p = skin.params();
-        if p.spring != Spring::Distance || p.volume_stiffness != 0.0 {
-            return Err(Error::Invalid(format!(
-                "GPU particle skinning: only T's forces are supported so far (spring = \
-                 Distance, volume_stiffness = 0; ParticleParams::t_method()), got spring = \
-                 {:?}, volume_stiffness = {}",
-                p.spring, p.volume_stiffness
-            )));
-        }
+        let corotated = p.spring == Spring::Corotated;
+        let pass0 = corotated || p.volume_stiffness > 0.0;
+        let (rot, half_rot, jac, rest_det, rest_off) = skin.gpu_rotation_state();
         let [start, nbr, upper, pair_start, pair_of] = skin.gpu_lists();
         let (rest_len, weight) = skin.gpu_edge_values();
         let (xa, v, ve) = skin.gpu_state();
@@ -141,7 +157,12 @@ impl GpuParticleSkin {
             .map(|i| Part {
                 rest: [rest[i].x, rest[i].y, rest[i].z, 0.0],
                 idx: [start[i], start[i + 1], upper[i], pair_start[i]],
-                bone: [bone[i], 0, 0, 0],
+                bone: [
+                    bone[i],
+                    rest_det[i].unwrap_or(1.0).to_bits(),
+                    rest_det[i].is_some() as u32,
+                    0,
+                ],
             })
             .collect();
         let mut edges: Vec<Edge> = (0..nbr.len())
@@ -150,6 +171,7 @@ impl GpuParticleSkin {
                 pair: pair_of[e],
                 rest_len: rest_len[e],
                 weight: weight[e],
+                off: v4(rest_off[e]),
             })
             .collect();
         if edges.is_empty() {
@@ -166,7 +188,24 @@ impl GpuParticleSkin {
             kb: p.bone_stiffness,
             cb: p.bone_damping,
             limit: skin.gpu_deviation_limit(),
+            kv: p.volume_stiffness,
+            corotated: corotated as u32,
+            _pad: [0; 2],
         };
+        let rots: Vec<Rot> = (0..xa.len())
+            .map(|i| {
+                let h = half_rot[i];
+                let mut hx = v4(h.x_axis);
+                hx[3] = jac[i];
+                Rot {
+                    q: rot[i].to_array(),
+                    hx,
+                    hy: v4(h.y_axis),
+                    hz: v4(h.z_axis),
+                }
+            })
+            .collect();
+        let rot_buffer = ctx.storage_buffer("particles rotations", &rots)?;
         let params_buffer = ctx.uniform_buffer("particles params", &params);
         let state = ctx.storage_buffer("particles state", &states)?;
         let part = ctx.storage_buffer("particles fixed", &parts)?;
@@ -180,18 +219,48 @@ impl GpuParticleSkin {
             shader!("common/dispatch.wgsl"),
             shader!("skin/particles.wgsl"),
         ];
-        let pairs_pipeline = ctx.pipeline("particles pairs", &sources, "pairs")?;
-        let pairs_bind = ctx.bind_group(
-            "particles pairs",
-            &pairs_pipeline,
-            &[
-                (0, &params_buffer),
-                (2, &state),
-                (3, &part),
-                (4, &edge),
-                (5, &pair_f),
-            ],
-        );
+        let (pairs_pipeline, pairs_bind, rotate) = if pass0 {
+            let rp = ctx.pipeline("particles rotate", &sources, "rotate")?;
+            let rb = ctx.bind_group(
+                "particles rotate",
+                &rp,
+                &[
+                    (0, &params_buffer),
+                    (2, &state),
+                    (3, &part),
+                    (4, &edge),
+                    (8, &rot_buffer),
+                ],
+            );
+            let pp = ctx.pipeline("particles pairs", &sources, "pairs_corotated")?;
+            let pb = ctx.bind_group(
+                "particles pairs",
+                &pp,
+                &[
+                    (0, &params_buffer),
+                    (2, &state),
+                    (3, &part),
+                    (4, &edge),
+                    (5, &pair_f),
+                    (8, &rot_buffer),
+                ],
+            );
+            (pp, pb, Some((rp, rb)))
+        } else {
+            let pp = ctx.pipeline("particles pairs", &sources, "pairs")?;
+            let pb = ctx.bind_group(
+                "particles pairs",
+                &pp,
+                &[
+                    (0, &params_buffer),
+                    (2, &state),
+                    (3, &part),
+                    (4, &edge),
+                    (5, &pair_f),
+                ],
+            );
+            (pp, pb, None)
+        };
         let update = ctx.pipeline("particles update", &sources, "update")?;
         let update_binds = (0..substeps)
             .map(|s| {
@@ -222,6 +291,7 @@ impl GpuParticleSkin {
             tfs,
             bad,
             pairs: (pairs_pipeline, pairs_bind),
+            rotate,
             update,
             update_binds,
             records: Vec::new(),
@@ -297,6 +367,12 @@ impl GpuParticleSkin {
                 label: Some("particles frame"),
             });
         for s in 0..substeps as usize {
+            if let Some((pipeline, bind)) = &self.rotate {
+                let mut pass = compute_pass(&mut encoder, "particles rotate", None);
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, bind, &[]);
+                ctx.dispatch_1d(&mut pass, self.n);
+            }
             {
                 let mut pass = compute_pass(&mut encoder, "particles pairs", None);
                 pass.set_pipeline(&self.pairs.0);

@@ -843,6 +843,21 @@ impl ParticleSkin {
     pub(crate) fn gpu_bone_count(&self) -> usize {
         self.bones
     }
+
+    /// For the GPU path: per particle its tracked rotation, half its rotation matrix, its
+    /// volume change and its rest determinant; per neighbour entry its rest offset.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn gpu_rotation_state(
+        &self,
+    ) -> (&[Quat], &[Mat3A], &[f32], &[Option<f32>], &[Vec3A]) {
+        (
+            &self.rot,
+            &self.half_rot,
+            &self.jac,
+            &self.rest_inv,
+            &self.rest_off,
+        )
+    }
 }
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
