@@ -22,8 +22,10 @@ struct Params {
     kv: f32,
     // 1: corotated springs (else distance springs).
     corotated: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // The mesh's vertex count, and 1 where vertex offsets turn with the particle's rotation
+    // (else with its bone's).
+    verts: u32,
+    vrot_particle: u32,
 }
 
 struct Step {
@@ -85,6 +87,88 @@ struct Tf {
 @group(0) @binding(6) var<storage, read> tfs: array<Tf>;
 @group(0) @binding(7) var<storage, read_write> bad: array<atomic<u32>>;
 @group(0) @binding(8) var<storage, read_write> rot: array<Rot>;
+// Vertices: the bones' rotations at the frame's end (xyzw), each particle's rotation for the
+// vertices, the vertex ties (4 particles, then their 4 rest offsets), the posed vertices.
+@group(0) @binding(9) var<storage, read> bone_q: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> prot: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read> ties: array<Tie>;
+@group(0) @binding(12) var<storage, read_write> verts: array<vec4<f32>>;
+
+struct Tie {
+    p: vec4<u32>,
+    o0: vec4<f32>,
+    o1: vec4<f32>,
+    o2: vec4<f32>,
+    o3: vec4<f32>,
+}
+
+// `rounds` rounds of Müller et al.'s iteration from q (skin/particles.rs `extract_rotation`).
+fn extract_rotation(a: mat3x3<f32>, q0: vec4<f32>, rounds: u32) -> vec4<f32> {
+    var q = q0;
+    for (var k = 0u; k < rounds; k++) {
+        let r = quat_mat(q);
+        let num = cross(r[0], a[0]) + cross(r[1], a[1]) + cross(r[2], a[2]);
+        let den = abs(dot(r[0], a[0]) + dot(r[1], a[1]) + dot(r[2], a[2])) + 1e-20;
+        let w = num / den;
+        if dot(w, w) < 1e-18 {
+            break;
+        }
+        let st = normalize(vec4<f32>(0.5 * w, 1.0));
+        q = normalize(quat_mul(st, q));
+    }
+    return q;
+}
+
+fn quat_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    let t = 2.0 * cross(q.xyz, v);
+    return v + q.w * t + cross(q.xyz, t);
+}
+
+// Each particle's rotation for the vertices (VertexRotation::Particle): one round from its
+// tracked rotation with corotated springs, else 20 rounds from its bone's.
+@compute @workgroup_size(64)
+fn particle_rotations(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = thread_index(gid, nwg);
+    if i >= p.n {
+        return;
+    }
+    let pi = part[i];
+    let xi = state[i].x.xyz;
+    var a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var e = pi.idx.x; e < pi.idx.y; e++) {
+        let ed = edge[e];
+        let d = state[ed.j].x.xyz - xi;
+        a += mat3x3<f32>(d * ed.off.x, d * ed.off.y, d * ed.off.z);
+    }
+    if p.corotated == 1u {
+        prot[i] = extract_rotation(a, rot[i].q, 1u);
+    } else {
+        prot[i] = extract_rotation(a, bone_q[pi.bone.x], 20u);
+    }
+}
+
+// Each vertex: the mean of its 4 particles' proposals (position plus the turned rest offset).
+@compute @workgroup_size(64)
+fn vertices(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let v = thread_index(gid, nwg);
+    if v >= p.verts {
+        return;
+    }
+    let t = ties[v];
+    let offs = array<vec3<f32>, 4>(t.o0.xyz, t.o1.xyz, t.o2.xyz, t.o3.xyz);
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < 4u; k++) {
+        let j = t.p[k];
+        var q: vec4<f32>;
+        if p.vrot_particle == 1u {
+            q = prot[j];
+        } else {
+            q = bone_q[part[j].bone.x];
+        }
+        sum += state[j].x.xyz + quat_rotate(q, offs[k]);
+    }
+    verts[v] = vec4<f32>(sum * 0.25, 1.0);
+}
 
 fn apply(m: Tf, q: vec3<f32>) -> vec3<f32> {
     return m.x.xyz * q.x + m.y.xyz * q.y + m.z.xyz * q.z + m.t.xyz;

@@ -19,27 +19,32 @@
 //!   particle, first failing substep) is read back at the frame's end: one 8-byte read.
 //! - **Read-back** ([`GpuParticleSkin::read_positions`]) only when asked.
 //!
-//! Supported: every force of the CPU path ([`Spring::Distance`] and [`Spring::Corotated`],
-//! with or without pressure). Not here: the vertices (read the particles back and use the
-//! CPU's vertex rule; the GPU's tracked rotations are not read back, so
-//! `VertexRotation::Particle` needs the CPU's own rotation fit), the frame metrics, and the
-//! state going back into the CPU's [`ParticleSkin`] (the GPU copy runs on its own). The
-//! blow-up check reports the lowest failing particle over the frame and the first failing
-//! substep (the CPU: the first substep's lowest), without the distance.
+//! - **Vertices** ([`GpuParticleSkin::vertices`]): the CPU's rule on the GPU, one invocation
+//!   per vertex (the mean of its 4 particles' proposals, rest offsets turned by the bone's
+//!   rotation at the last frame's end, or by the particle's own: a `particle_rotations` pass
+//!   first, one round from its tracked rotation with corotated springs, 20 from its bone's
+//!   with distance springs), then read back.
+//!
+//! Supported: every force and vertex rule of the CPU path ([`Spring::Distance`] and
+//! [`Spring::Corotated`], with or without pressure; both [`VertexRotation`]s). Not here: the
+//! frame metrics, and the state going back into the CPU's [`ParticleSkin`] (the GPU copy runs
+//! on its own from the state it was made from). The blow-up check reports the lowest failing
+//! particle over the frame and the first failing substep (the CPU: the first substep's
+//! lowest), without the distance.
 //!
 //! Precision: f32 on both sides; the same operations per pair and per particle in the same
 //! order, so differences come from contraction (fused multiply-adds) and the GPU's `length`
 //! and division. Measured on lavapipe (two-bone limb, 378 particles, 90° bend over 6 frames
 //! then held): max |GPU − CPU| per particle 6e-8 to 1.2e-7 m per frame with T's set,
 //! 1.2e-7 to 1.4e-7 with the defaults (corotated springs, pressure), not growing (the motion
-//! is damped).
+//! is damped); per vertex up to 1.8e-7 m.
 //!
 //! Cost: per substep two dispatches of ⌈particles / 64⌉ workgroups; per frame one upload of
 //! the substeps' bone transforms and an 8-byte read-back. GPU memory: 48 bytes per particle
 //! state, 48 per particle of fixed data, 64 per particle rotation, 32 per neighbour entry,
-//! 16 per pair, 64 per bone and substep.
+//! 16 per pair, 64 per bone and substep, 80 + 16 per vertex.
 
-use super::particles::{ParticleSkin, Spring};
+use super::particles::{ParticleSkin, Spring, VertexRotation};
 use glam::{Affine3A, Quat, Vec3, Vec3A};
 use imprint_core::{Error, Result};
 use imprint_gpu::{GpuContext, compute_pass, shader};
@@ -57,7 +62,15 @@ struct Params {
     limit: f32,
     kv: f32,
     corotated: u32,
-    _pad: [u32; 2],
+    verts: u32,
+    vrot_particle: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Tie {
+    p: [u32; 4],
+    o: [[f32; 4]; 4],
 }
 
 #[repr(C)]
@@ -119,6 +132,11 @@ pub struct GpuParticleSkin {
     /// Pass 0 (rotations and volume change), with corotated springs or pressure only.
     rotate: Option<(wgpu::ComputePipeline, wgpu::BindGroup)>,
     update: wgpu::ComputePipeline,
+    /// Vertices: the bones' rotations at the last frame's end, the posed vertices, the
+    /// particle-rotation and vertex passes.
+    bone_q: wgpu::Buffer,
+    verts: wgpu::Buffer,
+    vertex_passes: [(wgpu::ComputePipeline, wgpu::BindGroup); 2],
     /// One per substep (its `Step` uniform differs).
     update_binds: Vec<wgpu::BindGroup>,
     records: Vec<TfRecord>,
@@ -190,7 +208,8 @@ impl GpuParticleSkin {
             limit: skin.gpu_deviation_limit(),
             kv: p.volume_stiffness,
             corotated: corotated as u32,
-            _pad: [0; 2],
+            verts: 0,
+            vrot_particle: (p.vertex_rotation == VertexRotation::Particle) as u32,
         };
         let rots: Vec<Rot> = (0..xa.len())
             .map(|i| {
@@ -281,7 +300,63 @@ impl GpuParticleSkin {
                 )
             })
             .collect();
+        let (vp, vo) = skin.gpu_vertex_ties();
+        let mut ties: Vec<Tie> = vp
+            .iter()
+            .zip(vo)
+            .map(|(ps, os)| Tie {
+                p: *ps,
+                o: os.map(|o| [o.x, o.y, o.z, 0.0]),
+            })
+            .collect();
+        let verts_n = u32::try_from(ties.len())
+            .map_err(|_| Error::Invalid("GPU particle skinning: too many vertices".into()))?;
+        if ties.is_empty() {
+            ties.push(bytemuck::Zeroable::zeroed());
+        }
+        let mut params = params;
+        params.verts = verts_n;
+        ctx.queue
+            .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        let tie_buffer = ctx.storage_buffer("particles vertex ties", &ties)?;
+        let bone_q = ctx.storage_buffer(
+            "particles bone rotations",
+            &vec![[0.0f32, 0.0, 0.0, 1.0]; bones],
+        )?;
+        let prot = ctx.zeroed_buffer("particles vertex rotations", 16 * n as u64)?;
+        let verts = ctx.zeroed_buffer("particles vertices", 16 * ties.len() as u64)?;
+        let vertex_passes = [("particle_rotations", 0), ("vertices", 1)].map(|(entry, k)| {
+            let pl = ctx.pipeline("particles vertices", &sources, entry)?;
+            let list: Vec<(u32, &wgpu::Buffer)> = if k == 0 {
+                vec![
+                    (0, &params_buffer),
+                    (2, &state),
+                    (3, &part),
+                    (4, &edge),
+                    (8, &rot_buffer),
+                    (9, &bone_q),
+                    (10, &prot),
+                ]
+            } else {
+                vec![
+                    (0, &params_buffer),
+                    (2, &state),
+                    (3, &part),
+                    (9, &bone_q),
+                    (10, &prot),
+                    (11, &tie_buffer),
+                    (12, &verts),
+                ]
+            };
+            let bg = ctx.bind_group(entry, &pl, &list);
+            Ok::<_, Error>((pl, bg))
+        });
+        let [a, b] = vertex_passes;
+        let vertex_passes = [a?, b?];
         Ok(GpuParticleSkin {
+            bone_q,
+            verts,
+            vertex_passes,
             n,
             bones,
             substeps,
@@ -361,6 +436,9 @@ impl GpuParticleSkin {
             .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
         ctx.queue
             .write_buffer(&self.bad, 0, bytemuck::cast_slice(&[u32::MAX, u32::MAX]));
+        let end_q: Vec<[f32; 4]> = s1.iter().map(|&(q, _)| q.to_array()).collect();
+        ctx.queue
+            .write_buffer(&self.bone_q, 0, bytemuck::cast_slice(end_q.as_slice()));
         let mut encoder = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -406,6 +484,33 @@ impl GpuParticleSkin {
             });
         }
         Ok(())
+    }
+
+    /// The posed vertices (the CPU's [`ParticleSkin::vertices`] rule: the mean of the 4
+    /// particles' proposals, offsets turned by the particle's or the bone's rotation), in
+    /// the rest mesh's order (waits for the GPU).
+    pub fn vertices(&self, ctx: &GpuContext) -> Result<Vec<Vec3>> {
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("particles vertices"),
+            });
+        for (k, (pipeline, bind)) in self.vertex_passes.iter().enumerate() {
+            if k == 0 && self.params.vrot_particle == 0 {
+                continue;
+            }
+            let mut pass = compute_pass(&mut encoder, "particles vertices", None);
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind, &[]);
+            ctx.dispatch_1d(&mut pass, if k == 0 { self.n } else { self.params.verts });
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let raw: Vec<[f32; 4]> = ctx.read_buffer(&self.verts)?;
+        Ok(raw
+            .iter()
+            .take(self.params.verts as usize)
+            .map(|p| Vec3::new(p[0], p[1], p[2]))
+            .collect())
     }
 
     /// The particles' positions (waits for the GPU).

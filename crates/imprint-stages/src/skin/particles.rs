@@ -844,6 +844,11 @@ impl ParticleSkin {
         self.bones
     }
 
+    /// For the GPU path: per vertex its 4 particles and the rest offsets from them.
+    pub(crate) fn gpu_vertex_ties(&self) -> (&[[u32; 4]], &[[Vec3; 4]]) {
+        (&self.vert_particles, &self.vert_offsets)
+    }
+
     /// For the GPU path: per particle its tracked rotation, half its rotation matrix, its
     /// volume change and its rest determinant; per neighbour entry its rest offset.
     #[allow(clippy::type_complexity)]
