@@ -1177,7 +1177,8 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
         err.contains("twist.ron:4:") && err.contains("uper"),
         "{err}"
     );
-    // The blends on the GPU (lavapipe in CI): the same twisted limbs to f32 rounding.
+    // On the GPU (lavapipe in CI): the same twisted limbs to f32 rounding, the particles'
+    // included.
     std::fs::write(
         dir.join("twist.ron"),
         rig(r#"Twist(bone: "lower", degrees: 180, start: 0.0, duration: 0.5)"#),
@@ -1187,7 +1188,11 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
         return;
     }
     let gpu_report = read_json(&dir.join("gpu/report.json"));
-    for (n, file) in [("dqs", "obj/dqs_0035.obj"), ("lbs", "obj_l/lbs_0035.obj")] {
+    for (n, file) in [
+        ("dqs", "obj/dqs_0035.obj"),
+        ("lbs", "obj_l/lbs_0035.obj"),
+        ("particles", "obj_p/particles_0035.obj"),
+    ] {
         assert_eq!(gpu_report["nodes"][n]["backend"], "gpu");
         let a = imprint_core::Mesh::load_obj(&dir.join("o").join(file)).unwrap();
         let b = imprint_core::Mesh::load_obj(&dir.join("gpu").join(file)).unwrap();
@@ -1200,10 +1205,9 @@ fn skin_node_twists_a_limb_three_ways_and_feeds_other_nodes() {
         eprintln!("{n}: GPU − CPU at most {worst:.2e} m");
         assert!(worst < 1e-5, "{n}: GPU and CPU differ by {worst}");
     }
-    assert_eq!(gpu_report["nodes"]["particles"]["backend"], "cpu");
 }
 
-/// A Skin node whose rig file is missing, or whose particles are asked to run on the GPU, is
+/// A Skin node whose rig file is missing, or whose particle parameters are out of range, is
 /// refused before anything runs, naming the node and the field.
 #[test]
 fn skin_node_input_errors_name_the_field() {
@@ -1215,7 +1219,7 @@ fn skin_node_input_errors_name_the_field() {
         &["'s'", "rig file not found", "missing.ron"],
     );
     let c = case(&format!(
-        "{limb}\n        \"s\": Skin(mesh: \"limb\", rig: \"r.ron\", method: Particles(), backend: Gpu),\n        \"o\": WriteMesh(mesh: \"s\"),"
+        "{limb}\n        \"s\": Skin(mesh: \"limb\", rig: \"r.ron\", method: Particles(substeps: 0)),\n        \"o\": WriteMesh(mesh: \"s\"),"
     ));
     std::fs::write(
         c.dir.path().join("r.ron"),
@@ -1225,5 +1229,5 @@ fn skin_node_input_errors_name_the_field() {
     let out = imprint(&["check", c.file.to_str().unwrap()], c.dir.path());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("backend") && err.contains("CPU"), "{err}");
+    assert!(err.contains("method") && err.contains("substeps"), "{err}");
 }

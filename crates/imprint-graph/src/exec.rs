@@ -1525,8 +1525,7 @@ fn build_stages(
                 }
             }
             NodeSpec::Skin(k) => {
-                let particles = matches!(k.method, crate::schema::SkinMethod::Particles(_));
-                let ctx = if !particles && choose_gpu(want, name, gpu)? {
+                let ctx = if choose_gpu(want, name, gpu)? {
                     *gpu
                 } else {
                     None

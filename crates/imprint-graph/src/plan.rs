@@ -440,16 +440,6 @@ fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -
                 | crate::schema::SkinMethod::DualQuaternion { weights } => weights.validate(),
             }
             .map_err(|e| fail("method", e.to_string()))?;
-            if matches!(k.method, crate::schema::SkinMethod::Particles(_))
-                && k.backend == Some(Backend::Gpu)
-            {
-                return Err(fail(
-                    "backend",
-                    "particle skinning runs on the CPU (Linear and DualQuaternion have a GPU \
-                     path); set backend: Cpu, or leave it out"
-                        .into(),
-                ));
-            }
         }
         NodeSpec::Drape(d) => {
             d.params

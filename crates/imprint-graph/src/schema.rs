@@ -772,9 +772,9 @@ impl NodeSpec {
             | NodeSpec::Ground(_)
             | NodeSpec::Snow(_)
             | NodeSpec::Drape(_) => true,
-            // The GPU cloth reads distance fields only; particle skinning is CPU only.
+            // The GPU cloth reads distance fields only.
             NodeSpec::Cloth(c) => c.depth_colliders.is_empty(),
-            NodeSpec::Skin(k) => !matches!(k.method, SkinMethod::Particles(_)),
+            NodeSpec::Skin(_) => true,
             NodeSpec::Mesh(_)
             | NodeSpec::WriteField(_)
             | NodeSpec::WriteMesh(_)

@@ -15,6 +15,7 @@ use glam::{Affine3A, Vec3};
 use imprint_core::{Error, Mesh, Result};
 use imprint_gpu::GpuContext;
 use imprint_stages::skin::gpu::{BlendMethod, GpuBlend};
+use imprint_stages::skin::gpu_particles::GpuParticleSkin;
 use imprint_stages::skin::particles::ParticleSkin;
 use imprint_stages::skin::rig::{Pose, Rig};
 use imprint_stages::skin::weights::{self, Weights};
@@ -36,7 +37,7 @@ pub struct SkinStage {
     last_skin: Option<Vec<Affine3A>>,
     /// The rest volume and joint sections.
     rest_measures: Option<(f64, Vec<f64>)>,
-    /// The GPU the blends run on, when the node runs on the GPU.
+    /// The GPU the node runs on, when it does.
     gpu: Option<&'static GpuContext>,
 }
 
@@ -46,12 +47,14 @@ enum State {
         dual: bool,
         gpu: Option<Box<GpuBlend>>,
     },
-    Particles(Box<ParticleSkin>),
+    /// The CPU simulator (also the GPU's source, and its mesh's topology) and, when the node
+    /// runs on the GPU, the simulation there.
+    Particles(Box<ParticleSkin>, Option<Box<GpuParticleSkin>>),
 }
 
 impl SkinStage {
-    /// Loads the rig (and the mesh it binds, when the node names none). With `gpu`, the blends
-    /// run there (particle skinning runs on the CPU).
+    /// Loads the rig (and the mesh it binds, when the node names none). With `gpu`, the node
+    /// runs there (the blends, or the particles' substeps and vertices).
     pub fn new(
         name: &str,
         node: &SkinNode,
@@ -72,7 +75,7 @@ impl SkinStage {
             state: None,
             last_skin: None,
             rest_measures: None,
-            gpu: gpu.filter(|_| !matches!(node.method, SkinMethod::Particles(_))),
+            gpu,
         })
     }
 
@@ -128,7 +131,27 @@ impl SkinStage {
                 m.compute_normals();
                 m
             }
-            State::Particles(sim) => {
+            State::Particles(sim, gpu) => {
+                let ctx = self.gpu;
+                // One frame on whichever path the node runs on; the CPU reports its metrics.
+                let mut step = |start: &[Affine3A],
+                                end: &[Affine3A],
+                                k: u32,
+                                metrics: Option<&mut Map<String, Value>>|
+                 -> Result<()> {
+                    match (ctx, gpu.as_mut()) {
+                        (Some(ctx), Some(g)) => g.step_frame(ctx, start, end, k, dt_frame),
+                        _ => {
+                            let m = sim.step_frame(start, end, k, dt_frame)?;
+                            if let (Some(out), Value::Object(o)) =
+                                (metrics, serde_json::to_value(m).expect("plain data"))
+                            {
+                                out.extend(o);
+                            }
+                            Ok(())
+                        }
+                    }
+                };
                 // A run that starts after frame 0 first replays the frames before it: the
                 // particles' state is their history (so the frame is the whole run's, to the
                 // bit, and does not start from rest against a pose far from it).
@@ -136,16 +159,21 @@ impl SkinStage {
                     for k in 0..frame {
                         let p = self.rig.pose(k as f32 / fps).skin;
                         let start = self.last_skin.take().unwrap_or_else(|| p.clone());
-                        sim.step_frame(&start, &p, k, dt_frame)?;
+                        step(&start, &p, k, None)?;
                         self.last_skin = Some(p);
                     }
                 }
                 let start = self.last_skin.as_deref().unwrap_or(&pose.skin);
-                let m = sim.step_frame(start, &pose.skin, frame, dt_frame)?;
-                if let Value::Object(o) = serde_json::to_value(m).expect("plain data") {
-                    metrics.extend(o);
+                step(start, &pose.skin, frame, Some(&mut metrics))?;
+                match (ctx, gpu.as_ref()) {
+                    (Some(ctx), Some(g)) => {
+                        let mut m = (*rest).clone();
+                        m.positions = g.vertices(ctx)?;
+                        m.compute_normals();
+                        m
+                    }
+                    _ => sim.mesh(),
                 }
-                sim.mesh()
             }
         };
         let (rest_volume, rest_sections) = self.rest_measures.as_ref().expect("built above");
@@ -173,7 +201,7 @@ impl SkinStage {
     /// What the node reports once (the particle fill's counts), as (key, value) pairs.
     pub fn summary(&self) -> Vec<(String, Value)> {
         match &self.state {
-            Some(State::Particles(sim)) => {
+            Some(State::Particles(sim, _)) => {
                 let f = sim.fill_report();
                 vec![
                     ("particles".into(), f.adaptive_count.into()),
@@ -208,14 +236,19 @@ impl SkinStage {
                     gpu,
                 }
             }
-            SkinMethod::Particles(p) => State::Particles(Box::new(
-                ParticleSkin::new(rest, &segments, p)
+            SkinMethod::Particles(p) => {
+                let sim = ParticleSkin::new(rest, &segments, p)
                     .map_err(|e| match e {
                         Error::Invalid(m) => Error::Invalid(format!("node '{}': {m}", self.name)),
                         e => e,
                     })?
-                    .with_name(&self.name),
-            )),
+                    .with_name(&self.name);
+                let gpu = match self.gpu {
+                    Some(ctx) => Some(Box::new(GpuParticleSkin::new(ctx, &sim)?)),
+                    None => None,
+                };
+                State::Particles(Box::new(sim), gpu)
+            }
         })
     }
 

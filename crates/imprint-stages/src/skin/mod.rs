@@ -8,6 +8,8 @@
 //! - [`gpu`]: LBS and DQS as a compute dispatch, tested against [`blend`].
 //! - [`fill`]: the adaptive close-packed particle fill.
 //! - [`particles`]: the particle skinning simulation and its vertices.
+//! - [`gpu_particles`]: the same substeps and vertices on the GPU, tested against
+//!   [`particles`].
 //! - [`measure`]: volume, joint cross-section and self-intersection of a skinned mesh.
 
 pub mod blend;
