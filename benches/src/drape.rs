@@ -78,22 +78,10 @@ pub fn section(_root: &Path, repeat: usize) -> String {
 /// The view sets compared: T's three, the six axis directions, and those with the eight cube
 /// diagonals.
 fn view_sets() -> Vec<(&'static str, Vec<Vec3>)> {
-    let axes = [
-        Vec3::X,
-        Vec3::NEG_X,
-        Vec3::Y,
-        Vec3::NEG_Y,
-        Vec3::Z,
-        Vec3::NEG_Z,
-    ];
-    let mut fourteen = axes.to_vec();
-    for i in 0..8 {
-        let s = |b: u32| if i & b == 0 { 1.0 } else { -1.0 };
-        fourteen.push(Vec3::new(s(1), s(2), s(4)).normalize());
-    }
+    let (axes, fourteen) = imprint_tests::drape::axes_and_diagonals();
     vec![
         ("3 (T: top, front, back)", DrapeParams::default().views),
-        ("6 (±x, ±y, ±z)", axes.to_vec()),
+        ("6 (±x, ±y, ±z)", axes),
         ("14 (axes and cube diagonals)", fourteen),
     ]
 }
@@ -105,16 +93,7 @@ fn u_body_shares(s: &mut String, sets: &[(&str, Vec<Vec3>)]) {
     let body = imprint_tests::drape::u_body();
     let b = body.bounds();
     let n = 24;
-    let garment: Vec<Vec3> = (0..n * n * n)
-        .map(|i| {
-            let t = Vec3::new(
-                (i % n) as f32 + 0.5,
-                ((i / n) % n) as f32 + 0.5,
-                (i / (n * n)) as f32 + 0.5,
-            ) / n as f32;
-            b.min + t * (b.max - b.min)
-        })
-        .collect();
+    let garment = imprint_tests::drape::lattice(&b, n);
     let _ = writeln!(
         s,
         "\nWhere the views fail: the U-shaped body of the tests (three closed boxes: a bar, a \

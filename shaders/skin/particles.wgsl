@@ -102,6 +102,20 @@ struct Tie {
     o3: vec4<f32>,
 }
 
+// Σ over a particle's neighbours of (x_j − x_i) ⊗ rest offset: the matrix its rotation is
+// fitted to and whose determinant gives its volume change (skin/particles.rs, the same sum in
+// the same order).
+fn neighbourhood(i: u32, pi: Part) -> mat3x3<f32> {
+    let xi = state[i].x.xyz;
+    var a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var e = pi.idx.x; e < pi.idx.y; e++) {
+        let ed = edge[e];
+        let d = state[ed.j].x.xyz - xi;
+        a += mat3x3<f32>(d * ed.off.x, d * ed.off.y, d * ed.off.z);
+    }
+    return a;
+}
+
 // `rounds` rounds of Müller et al.'s iteration from q (skin/particles.rs `extract_rotation`).
 fn extract_rotation(a: mat3x3<f32>, q0: vec4<f32>, rounds: u32) -> vec4<f32> {
     var q = q0;
@@ -133,13 +147,7 @@ fn particle_rotations(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(nu
         return;
     }
     let pi = part[i];
-    let xi = state[i].x.xyz;
-    var a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var e = pi.idx.x; e < pi.idx.y; e++) {
-        let ed = edge[e];
-        let d = state[ed.j].x.xyz - xi;
-        a += mat3x3<f32>(d * ed.off.x, d * ed.off.y, d * ed.off.z);
-    }
+    let a = neighbourhood(i, pi);
     if p.corotated == 1u {
         prot[i] = extract_rotation(a, rot[i].q, 1u);
     } else {
@@ -215,13 +223,7 @@ fn rotate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         return;
     }
     let pi = part[i];
-    let xi = state[i].x.xyz;
-    var a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var e = pi.idx.x; e < pi.idx.y; e++) {
-        let ed = edge[e];
-        let d = state[ed.j].x.xyz - xi;
-        a += mat3x3<f32>(d * ed.off.x, d * ed.off.y, d * ed.off.z);
-    }
+    let a = neighbourhood(i, pi);
     var ro = rot[i];
     if p.corotated == 1u {
         var q = ro.q;

@@ -53,6 +53,20 @@ pub mod cloth {
         )
     }
 
+    /// The sphere drop of the CPU cloth tests: a 24 x 24 cloth (1 m) 0.15 above
+    /// [`sphere_drop_field`]'s sphere, 16 substeps, ε = 1 cm, friction 0.5.
+    pub fn sphere_drop_params() -> ClothParams {
+        let mut p = ClothParams::new(
+            grid([1.0, 1.0], [24, 24], Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
+            harada(60.0, 15.0),
+        );
+        p.substeps = 16;
+        p.damping = 0.995;
+        p.collision.epsilon = 0.01;
+        p.collision.friction = 0.5;
+        p
+    }
+
     /// A flat grid cloth.
     pub fn grid(size: [f32; 2], resolution: [u32; 2], center: Vec3, normal: Vec3) -> Shape {
         Shape::Grid {
@@ -187,6 +201,40 @@ pub mod drape {
         body.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
         body.append(&boxed(Vec3::new(-0.5, 0.3, 0.7), Vec3::new(0.5, 1.0, 0.8)));
         body
+    }
+
+    /// An `n`³ lattice of points at the cell centres of `bounds` split `n` ways per axis (a
+    /// garment that fills a body's box).
+    pub fn lattice(bounds: &imprint_core::Aabb, n: usize) -> Vec<Vec3> {
+        (0..n * n * n)
+            .map(|i| {
+                let t = Vec3::new(
+                    (i % n) as f32 + 0.5,
+                    ((i / n) % n) as f32 + 0.5,
+                    (i / (n * n)) as f32 + 0.5,
+                ) / n as f32;
+                bounds.min + t * (bounds.max - bounds.min)
+            })
+            .collect()
+    }
+
+    /// The view sets the drape is measured with: the six axis directions, and those with the
+    /// eight cube diagonals (T's own three are `DrapeParams::default().views`).
+    pub fn axes_and_diagonals() -> (Vec<Vec3>, Vec<Vec3>) {
+        let axes = vec![
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ];
+        let mut fourteen = axes.clone();
+        for i in 0..8 {
+            let s = |b: u32| if i & b == 0 { 1.0 } else { -1.0 };
+            fourteen.push(Vec3::new(s(1), s(2), s(4)).normalize());
+        }
+        (axes, fourteen)
     }
 }
 

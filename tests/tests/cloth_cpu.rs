@@ -13,7 +13,9 @@ use imprint_stages::cloth::{
 };
 use imprint_tests::asset;
 
-use imprint_tests::cloth::{grid, harada, sim, sphere_drop_field, sphere_field};
+use imprint_tests::cloth::{
+    grid, harada, sim, sphere_drop_field, sphere_drop_params, sphere_field,
+};
 
 const FPS: f32 = 60.0;
 
@@ -25,19 +27,6 @@ fn noise(i: usize, k: u64) -> f32 {
 
 fn bits(v: &[Vec4]) -> Vec<[u32; 4]> {
     v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
-}
-
-/// A 24 x 24 cloth dropped from 0.15 above a sphere of radius 0.3, 16 substeps per frame.
-fn sphere_drop_params() -> ClothParams {
-    let mut p = ClothParams::new(
-        grid([1.0, 1.0], [24, 24], Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
-        harada(60.0, 15.0),
-    );
-    p.substeps = 16;
-    p.damping = 0.995;
-    p.collision.epsilon = 0.01;
-    p.collision.friction = 0.5;
-    p
 }
 
 #[test]

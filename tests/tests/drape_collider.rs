@@ -9,23 +9,11 @@ use imprint_core::mesh::primitives::uv_sphere;
 use imprint_core::raster::rasterize_depth_with;
 use imprint_stages::cloth::{Body, ClothParams, Pin};
 use imprint_stages::drape::{DepthCamera, DepthColliderParams};
-use imprint_tests::cloth::{grid, harada, sim, sphere_drop_field, sphere_field};
+use imprint_tests::cloth::{
+    grid, harada, sim, sphere_drop_field, sphere_drop_params, sphere_field,
+};
 
 const FPS: f32 = 60.0;
-
-/// The sphere drop of the CPU cloth tests: 24 × 24 cloth from 0.15 above a sphere of radius
-/// 0.3, 16 substeps, ε = 1 cm.
-fn sphere_drop_params() -> ClothParams {
-    let mut p = ClothParams::new(
-        grid([1.0, 1.0], [24, 24], Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
-        harada(60.0, 15.0),
-    );
-    p.substeps = 16;
-    p.damping = 0.995;
-    p.collision.epsilon = 0.01;
-    p.collision.friction = 0.5;
-    p
-}
 
 /// T's views (top, front, back) plus a side view: three distinct lines.
 fn views() -> DepthColliderParams {

@@ -301,33 +301,12 @@ fn drape_dump() {
     let Ok(path) = std::env::var("DRAPE_DUMP") else {
         return;
     };
-    let axes = vec![
-        Vec3::X,
-        Vec3::NEG_X,
-        Vec3::Y,
-        Vec3::NEG_Y,
-        Vec3::Z,
-        Vec3::NEG_Z,
-    ];
-    let mut fourteen = axes.clone();
-    for i in 0..8 {
-        let s = |b: u32| if i & b == 0 { 1.0 } else { -1.0 };
-        fourteen.push(Vec3::new(s(1), s(2), s(4)).normalize());
-    }
+    let (axes, fourteen) = imprint_tests::drape::axes_and_diagonals();
     let sets = [DrapeParams::default().views, axes, fourteen];
     let u = u_body();
     let b = u.bounds();
     let n = 24;
-    let lattice: Vec<Vec3> = (0..n * n * n)
-        .map(|i| {
-            let t = Vec3::new(
-                (i % n) as f32 + 0.5,
-                ((i / n) % n) as f32 + 0.5,
-                (i / (n * n)) as f32 + 0.5,
-            ) / n as f32;
-            b.min + t * (b.max - b.min)
-        })
-        .collect();
+    let lattice = imprint_tests::drape::lattice(&b, n);
     let turned = Quat::from_axis_angle(Vec3::new(1.0, 2.0, 0.5).normalize(), 0.7);
     let mut boxed = cuboid(Vec3::new(0.5, 0.4, 0.3), 4);
     for p in &mut boxed.positions {

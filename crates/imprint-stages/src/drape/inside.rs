@@ -198,18 +198,7 @@ impl InsideTest {
         let bounds = mesh.bounds();
         // The three axes' bins and the grid's far regions are independent: built side by side.
         let (axes, far) = rayon::join(
-            || {
-                let (x, (y, z)) = rayon::join(
-                    || AxisGrid::new(&tris, &bounds, 0),
-                    || {
-                        rayon::join(
-                            || AxisGrid::new(&tris, &bounds, 1),
-                            || AxisGrid::new(&tris, &bounds, 2),
-                        )
-                    },
-                );
-                [x, y, z]
-            },
+            || AxisGrid::all(&tris, &bounds),
             || {
                 let finite = tris.iter().flatten().all(|v| v.is_finite());
                 if finite && !tris.is_empty() && !bounds.is_empty() && even_edges(mesh) {
@@ -234,18 +223,8 @@ impl InsideTest {
         let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
             .map(|t| mesh.triangle(t))
             .collect();
-        let bounds = mesh.bounds();
-        let (x, (y, z)) = rayon::join(
-            || AxisGrid::new(&tris, &bounds, 0),
-            || {
-                rayon::join(
-                    || AxisGrid::new(&tris, &bounds, 1),
-                    || AxisGrid::new(&tris, &bounds, 2),
-                )
-            },
-        );
         InsideTest {
-            axes: [x, y, z],
+            axes: AxisGrid::all(&tris, &mesh.bounds()),
             cells: None,
         }
     }
@@ -367,6 +346,20 @@ impl Tri2 {
 }
 
 impl AxisGrid {
+    /// The grids of the three axes, built side by side.
+    fn all(tris: &[[Vec3; 3]], bounds: &Aabb) -> [Self; 3] {
+        let (x, (y, z)) = rayon::join(
+            || AxisGrid::new(tris, bounds, 0),
+            || {
+                rayon::join(
+                    || AxisGrid::new(tris, bounds, 1),
+                    || AxisGrid::new(tris, bounds, 2),
+                )
+            },
+        );
+        [x, y, z]
+    }
+
     fn new(tris: &[[Vec3; 3]], bounds: &Aabb, axis: usize) -> Self {
         let uv = [(axis + 1) % 3, (axis + 2) % 3];
         let proj = |v: Vec3| DVec2::new(v[uv[0]] as f64, v[uv[1]] as f64);
