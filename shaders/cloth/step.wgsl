@@ -94,6 +94,9 @@ struct Stats {
     step2: f32,
     // Largest |x_next - 2 x + x_prev| ^ 2 (times nothing: the host divides by dt^4).
     accel2: f32,
+    // Written by `residual` after the frame: ε - signed distance at the frame's end, the
+    // largest over the colliders and the ground, when positive (closer than ε); else 0.
+    close_depth: f32,
 }
 
 const NONE: u32 = 0xffffffffu;
@@ -509,4 +512,36 @@ fn substep(
     st.accel2 = max(st.accel2, dot(d2, d2));
     stats[i] = st;
     next[i] = vec4<f32>(x, inv_m);
+}
+
+// After a frame's last substep, with `pos` the frame's end positions and the last substep's
+// parameters (s = 1: only the end slots are read): each free particle's residual contact, as
+// imprint_stages::cloth::ClothSim's frame pass measures it against the end fields (its own
+// position as where it came from, so the reach is 2ε) and the ground. Nothing else changes.
+@compute @workgroup_size(64)
+fn residual(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+) {
+    let i = thread_index(gid, nwg);
+    if i >= params.n {
+        return;
+    }
+    let x4 = pos[i];
+    var worst = 0.0;
+    if x4.w != 0.0 {
+        let x = x4.xyz;
+        let eps = params.eps;
+        let nf = max(params.nf, 1u);
+        for (var k = 0u; k < params.nf; k++) {
+            let sd = signed_sample(k, x, x, side[i * nf + k]);
+            if sd.ok {
+                worst = max(worst, eps - sd.distance);
+            }
+        }
+        if params.has_ground == 1u {
+            worst = max(worst, params.ground + eps - x.y);
+        }
+    }
+    stats[i].close_depth = worst;
 }

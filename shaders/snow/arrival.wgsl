@@ -25,7 +25,8 @@ struct LookupParams {
     bias_texels: f32,
     res: u32,
     receivers: u32,
-    _pad0: u32,
+    // `lookup_resident`: elements from one row of `texels` to the next.
+    row_texels: u32,
     _pad1: u32,
 }
 
@@ -36,6 +37,9 @@ struct LookupParams {
 // View depth per texel, row-major from the top row; UNCOVERED where no triangle covers it.
 @group(0) @binding(3) var<storage, read> depth_map: array<f32>;
 @group(0) @binding(4) var<storage, read_write> counts: array<u32>;
+// `lookup_resident`: the rasteriser's texels where it rendered them (imprint_gpu::raster::
+// GpuDepthMap): per texel (view depth, coverage), rows `row_texels` apart, top row first.
+@group(0) @binding(5) var<storage, read> texels: array<vec2<f32>>;
 
 const MAX_BIAS_SLOPE: f32 = 8.0;
 // f32::MAX (not +inf, which a compiler may assume away).
@@ -61,6 +65,40 @@ fn lookup(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let i = u32(clamp(floor(px), 0.0, last));
     let j = u32(clamp(floor(py), 0.0, last));
     let seen = depth_map[j * lp.res + i];
+    var reached = true;
+    if seen != UNCOVERED {
+        let tan = min(sqrt(max(1.0 - c * c, 0.0)) / c, MAX_BIAS_SLOPE);
+        reached = v.z <= seen + lp.texel * (lp.bias_texels + tan);
+    }
+    if reached {
+        counts[r] += 1u;
+    }
+}
+
+// `lookup` on a depth map left where the rasteriser rendered it: the same test, the texel
+// read from `texels` (nothing uploaded).
+@compute @workgroup_size(64)
+fn lookup_resident(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let r = thread_index(gid, nwg);
+    if r >= lp.receivers {
+        return;
+    }
+    let n = normals[r].xyz;
+    let c = -dot(n, lp.dir.xyz);
+    // `!(c > 0)` also refuses NaN.
+    if !(c > 0.0) {
+        return;
+    }
+    let q = points[r].xyz - lp.eye.xyz;
+    let v = vec3<f32>(dot(q, lp.right.xyz), dot(q, lp.up.xyz), dot(q, lp.forward.xyz));
+    let px = lp.centre + v.x * lp.k;
+    let py = lp.centre - v.y * lp.k;
+    let last = f32(lp.res) - 1.0;
+    let i = u32(clamp(floor(px), 0.0, last));
+    let j = u32(clamp(floor(py), 0.0, last));
+    // The value the host path uploads: the depth where covered, UNCOVERED elsewhere.
+    let t = texels[j * lp.row_texels + i];
+    let seen = select(UNCOVERED, t.x, t.y > 0.5);
     var reached = true;
     if seen != UNCOVERED {
         let tan = min(sqrt(max(1.0 - c * c, 0.0)) / c, MAX_BIAS_SLOPE);

@@ -4,7 +4,7 @@
 //! while running.
 
 use clap::{Parser, Subcommand, ValueEnum};
-use imprint_graph::exec::{RunOptions, run};
+use imprint_graph::exec::{Run, RunOptions};
 use imprint_graph::schema::Backend;
 use imprint_graph::{Error, Plan};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -12,6 +12,8 @@ use std::io::IsTerminal;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `print!` and `println!` to standard output, ending the program quietly (exit 0) when it
 /// is a closed pipe (`imprint check FILE | head`), as command-line tools do, not panicking.
@@ -57,6 +59,13 @@ enum Command {
         /// Override a node's field: NODE.FIELD=VALUE (VALUE in RON), repeatable.
         #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
         sets: Vec<String>,
+        /// Keep DIR/checkpoint.bin, written every N frames and at the end.
+        #[arg(long, value_name = "N")]
+        checkpoint_every: Option<u32>,
+        /// Continue from DIR/checkpoint.bin (an interrupted run, or one that ran fewer
+        /// frames) to the same bytes as one uninterrupted run of --frames.
+        #[arg(long)]
+        resume: bool,
     },
     /// Validate a pipeline; list what will run, on which frames, and what is pruned and why.
     Check {
@@ -214,12 +223,25 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             frames,
             backend,
             sets,
+            checkpoint_every,
+            resume,
         } => {
-            let plan = imprint_graph::load(&file, &sets)?;
-            for w in &plan.warnings {
-                eprintln!("warning: {w}");
+            if checkpoint_every == Some(0) {
+                return Err(imprint_core::Error::Invalid(
+                    "--checkpoint-every must be at least 1".into(),
+                )
+                .into());
             }
-            run_plan(&plan, out, frames, backend.map(Into::into))
+            let plan = imprint_graph::load(&file, &sets)?;
+            let opts = RunOptions {
+                out,
+                frames,
+                backend: backend.map(Into::into),
+                checkpoint_every: checkpoint_every.unwrap_or(0),
+                resume,
+                stop: Some(stop_on_signal()),
+            };
+            run_plan(&plan, opts)
         }
         Command::Check { file, sets } => {
             let plan = imprint_graph::load(&file, &sets)?;
@@ -265,7 +287,13 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
                 },
                 Path::new("."),
             )?;
-            run_plan(&plan, out, None, backend.map(Into::into))
+            let opts = RunOptions {
+                out,
+                backend: backend.map(Into::into),
+                stop: Some(stop_on_signal()),
+                ..Default::default()
+            };
+            run_plan(&plan, opts)
         }
     }
 }
@@ -349,17 +377,32 @@ fn stress_cloth(
     Ok(s)
 }
 
-fn run_plan(
-    plan: &Plan,
-    out: PathBuf,
-    frames: Option<Range<u32>>,
-    backend: Option<Backend>,
-) -> imprint_graph::Result<()> {
-    let opts = RunOptions {
-        out: out.clone(),
-        frames,
-        backend,
+/// A flag that Ctrl-C or SIGTERM sets: the run stops before its next frame, keeping its
+/// report (and checkpoint, with --checkpoint-every), and exits with 130.
+fn stop_on_signal() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    // A second signal ends the program at once.
+    let handler = move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
     };
+    if let Err(e) = ctrlc::set_handler(handler) {
+        eprintln!("warning: Ctrl-C will end the run without its report: {e}");
+    }
+    stop
+}
+
+fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
+    let out = opts.out.clone();
+    let run = Run::start(plan, &opts)?;
+    for w in run.warnings() {
+        eprintln!("warning: {w}");
+    }
+    if let Some(c) = run.executor().report().resumed_at {
+        eprintln!("resuming at frame {c} from {}", out.join("checkpoint.bin").display());
+    }
     let bar = ProgressBar::new(0);
     if std::io::stderr().is_terminal() {
         bar.set_style(
@@ -372,10 +415,13 @@ fn run_plan(
     } else {
         bar.set_draw_target(ProgressDrawTarget::hidden());
     }
-    let report = run(plan, &opts, &mut |done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    })?;
+    let report = run.finish(
+        &mut |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+        None,
+    )?;
     bar.finish_and_clear();
     outln!("{}", report.table(&plan.order));
     outln!(
@@ -454,7 +500,7 @@ fn describe(plan: &Plan) -> String {
         let inputs: Vec<String> = node
             .inputs()
             .iter()
-            .map(|(p, n, t)| format!("{p}={n} ({t})"))
+            .map(|p| format!("{}={} ({})", p.port, p.node, p.ty))
             .collect();
         // Nodes with two paths run where the file says; the rest run on the CPU.
         let on = match node.backend().or(Some(f.backend)) {

@@ -205,6 +205,8 @@ impl Row {
 /// The error of the plot and of the Pareto front: one node's mean, RMS or max.
 struct Primary {
     node: String,
+    /// The node's kind, for messages.
+    node_kind: &'static str,
     kind: TrackKind,
     /// 0 mean, 1 RMS, 2 max.
     stat: usize,
@@ -212,26 +214,17 @@ struct Primary {
 
 const STATS: [&str; 3] = ["mean", "rms", "max"];
 
-/// The kind of error a node of this kind has, if any.
-fn track_kind(node_kind: &str) -> Option<TrackKind> {
-    match node_kind {
-        "DistanceField" => Some(TrackKind::Field),
-        "Cloth" => Some(TrackKind::Cloth),
-        "Heightmap" => Some(TrackKind::Heights),
-        _ => None,
-    }
-}
-
 impl Primary {
     /// `--error NODE[.STAT]`, or the last node of the reference's run with an error metric
     /// (a cloth's max, the others' RMS); `None` when no node has one.
     fn choose(arg: Option<&str>, plan: &Plan) -> Result<Option<Primary>> {
-        let default_stat = |kind| if kind == TrackKind::Cloth { 2 } else { 1 };
+        let default_stat = |kind| if kind == TrackKind::Vertices { 2 } else { 1 };
         let Some(arg) = arg else {
             return Ok(plan.order.iter().rev().find_map(|n| {
-                let kind = track_kind(plan.file.nodes[n].kind())?;
+                let kind = TrackKind::of(&plan.file.nodes[n])?;
                 Some(Primary {
                     node: n.clone(),
+                    node_kind: plan.file.nodes[n].kind(),
                     kind,
                     stat: default_stat(kind),
                 })
@@ -252,16 +245,24 @@ impl Primary {
             .file
             .nodes
             .get(node)
-            .and_then(|n| track_kind(n.kind()))
+            .and_then(TrackKind::of)
             .filter(|_| plan.order.iter().any(|o| o == node))
             .ok_or_else(|| {
+                let tracked: Vec<&str> = plan
+                    .order
+                    .iter()
+                    .filter(|n| TrackKind::of(&plan.file.nodes[*n]).is_some())
+                    .map(|n| n.as_str())
+                    .collect();
                 invalid(format!(
-                    "--error {arg}: '{node}' is not a DistanceField, Cloth or Heightmap node \
-                     that the reference runs"
+                    "--error {arg}: '{node}' is not a node with an error metric that the \
+                     reference runs (those are: {})",
+                    tracked.join(", ")
                 ))
             })?;
         Ok(Some(Primary {
             node: node.to_string(),
+            node_kind: plan.file.nodes[node].kind(),
             kind,
             stat: stat.unwrap_or(default_stat(kind)),
         }))
@@ -270,7 +271,7 @@ impl Primary {
     fn describe(&self) -> String {
         let kind = match self.kind {
             TrackKind::Field => "field",
-            TrackKind::Cloth => "cloth",
+            TrackKind::Vertices => &self.node_kind.to_lowercase(),
             TrackKind::Heights => "height field",
         };
         let stat = ["mean", "RMS", "max"][self.stat];
@@ -345,6 +346,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         out,
         frames: Some(frames.clone()),
         backend: backend_override,
+        ..Default::default()
     };
     let reference = match cached {
         Some(r) => {

@@ -49,13 +49,19 @@ pub enum Error {
     /// Anything else that went wrong while running.
     #[error("{0}")]
     Run(String),
+
+    /// Stopped by a signal (Ctrl-C, SIGTERM) after `frame`'s predecessor; exit code 130.
+    #[error("interrupted before frame {frame}")]
+    Interrupted { frame: u32 },
 }
 
 impl Error {
-    /// 2: the input is invalid (fix the file or the arguments); 1: a failure while running.
+    /// 2: the input is invalid (fix the file or the arguments); 1: a failure while running;
+    /// 130: interrupted (the shells' code for Ctrl-C).
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Mesh { .. } | Error::Invalid(_) | Error::TooLarge { .. } => 2,
+            Error::Interrupted { .. } => 130,
             _ => 1,
         }
     }

@@ -19,7 +19,7 @@ pub enum BoundaryVariant {
 
 /// One point per surface cell, cells in increasing linear index (so the order, and every
 /// tie-break that depends on it, is the same on every backend and thread count).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Boundary {
     pub spec: GridSpec,
     pub variant: BoundaryVariant,
@@ -67,7 +67,10 @@ pub struct FieldSample {
 /// With `faces` (built from a `Closest` boundary) the distance and vector of a cell go to the
 /// closest point of the triangle that owns its nearest boundary point, not to the point itself:
 /// one point per cell misses ridges and tight curves by up to half a cell, the triangle does not.
-#[derive(Clone, Debug)]
+///
+/// Serde writes everything but the lazily computed [`DistanceField::cells`], which a loaded
+/// field computes again on first use (the same values: they depend on the other fields only).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct DistanceField {
     pub spec: GridSpec,
     /// Half-width of the band, in cells (H's `a`).
@@ -81,6 +84,8 @@ pub struct DistanceField {
     /// The owning triangle of each point, when distances are refined to the triangles.
     pub faces: Option<Arc<Vec<[Vec3; 3]>>>,
     /// [`DistanceField::cells`], once asked for (write `Default::default()` when building).
+    /// Not serialised: a cache of the fields above, empty after loading.
+    #[serde(skip)]
     pub cells: LazyCells,
 }
 

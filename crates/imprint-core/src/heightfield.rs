@@ -7,8 +7,9 @@
 use crate::error::check_alloc;
 use crate::{Error, Mesh, Result};
 use glam::{UVec2, Vec2, Vec3};
+use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HeightField {
     /// World (x, z) of the centre of cell (0, 0).
     pub origin: Vec2,

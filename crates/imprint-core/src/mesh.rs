@@ -3,10 +3,11 @@
 
 use crate::{Aabb, Error, Result};
 use glam::{Mat4, Vec2, Vec3};
+use serde::{Deserialize, Serialize};
 use std::f32::consts::{PI, TAU};
 use std::path::Path;
 
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Mesh {
     pub positions: Vec<Vec3>,
     pub triangles: Vec<[u32; 3]>,

@@ -31,6 +31,7 @@ use crate::geom::barycentric;
 use crate::{Error, Mesh, Result};
 use glam::{BVec4A, Vec3, Vec4};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Largest accepted width or height, in pixels.
@@ -55,7 +56,7 @@ pub struct RasterOptions {
 
 /// A depth image: the camera it was taken with, the view depth per pixel (row 0 on top) and
 /// the coverage mask. Uncovered pixels hold `f32::INFINITY`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DepthMap {
     pub camera: Camera,
     pub width: u32,

@@ -14,10 +14,58 @@ pub const WORKGROUP_SIZE: u32 = 64;
 const NO_ADAPTER: &str = "no GPU adapter found; install a Vulkan driver \
     (Debian: mesa-vulkan-drivers libvulkan1) or use --backend cpu";
 
+/// The device's queue, through which every queued upload is counted
+/// ([`crate::transfer`]): the writes of `wgpu::Queue`, each adding its bytes to this thread's
+/// uploads, and submission. There is no way to the bare `wgpu::Queue`, so no upload can miss
+/// the counters.
+pub struct GpuQueue {
+    inner: wgpu::Queue,
+}
+
+impl GpuQueue {
+    /// `wgpu::Queue::write_buffer`, counted: `data.len()` bytes uploaded.
+    pub fn write_buffer(&self, buffer: &wgpu::Buffer, offset: wgpu::BufferAddress, data: &[u8]) {
+        crate::transfer::count_upload(data.len() as u64);
+        self.inner.write_buffer(buffer, offset, data);
+    }
+
+    /// `wgpu::Queue::write_texture`, counted: `data.len()` bytes uploaded.
+    pub fn write_texture(
+        &self,
+        texture: wgpu::TexelCopyTextureInfo<'_>,
+        data: &[u8],
+        data_layout: wgpu::TexelCopyBufferLayout,
+        size: wgpu::Extent3d,
+    ) {
+        crate::transfer::count_upload(data.len() as u64);
+        self.inner.write_texture(texture, data, data_layout, size);
+    }
+
+    /// `wgpu::Queue::submit` (moves nothing between host and device).
+    pub fn submit<I: IntoIterator<Item = wgpu::CommandBuffer>>(
+        &self,
+        command_buffers: I,
+    ) -> wgpu::SubmissionIndex {
+        self.inner.submit(command_buffers)
+    }
+
+    /// `wgpu::Queue::get_timestamp_period`.
+    pub fn get_timestamp_period(&self) -> f32 {
+        self.inner.get_timestamp_period()
+    }
+}
+
+impl std::fmt::Debug for GpuQueue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GpuQueue")
+    }
+}
+
 /// One wgpu device and queue, with what the stages need to know about them.
 pub struct GpuContext {
     pub device: wgpu::Device,
-    pub queue: wgpu::Queue,
+    /// The queue: its writes are counted uploads ([`crate::transfer`]).
+    pub queue: GpuQueue,
     pub adapter_info: wgpu::AdapterInfo,
     /// The limits the device was created with (all the adapter offers).
     pub limits: wgpu::Limits,
@@ -106,7 +154,7 @@ impl GpuContext {
         })?;
         Ok(GpuContext {
             device,
-            queue,
+            queue: GpuQueue { inner: queue },
             adapter_info,
             limits,
             features,
@@ -204,6 +252,7 @@ impl GpuContext {
         } else {
             bytes
         };
+        crate::transfer::count_upload(contents.len() as u64);
         self.guarded(label, contents.len() as u64, || {
             self.device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -247,6 +296,7 @@ impl GpuContext {
 
     /// A small uniform buffer holding `value` (parameters of a pass).
     pub fn uniform_buffer<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        crate::transfer::count_upload(std::mem::size_of::<T>() as u64);
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -256,7 +306,8 @@ impl GpuContext {
     }
 
     /// Copies a buffer (made with `COPY_SRC`, as all of ours are) back to the CPU, waiting for
-    /// the queue. For writers and tests: GPU results otherwise stay on the GPU.
+    /// the queue. For writers, tests, error measurement and CPU consumers: GPU results
+    /// otherwise stay on the GPU. Counted ([`crate::transfer`]): the buffer's whole size.
     pub fn read_buffer<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
         let size = buffer.size();
         let staging = self.guarded("readback buffer", size, || {
@@ -274,20 +325,34 @@ impl GpuContext {
             });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
+        let bytes = self.map_read(&staging, 0..size, "a buffer")?;
+        let whole = (bytes.len() / std::mem::size_of::<T>().max(1)) * std::mem::size_of::<T>();
+        Ok(bytemuck::pod_collect_to_vec::<u8, T>(&bytes[..whole]))
+    }
+
+    /// Waits for the queue, maps `range` of `staging` (a `MAP_READ` buffer the submitted work
+    /// filled), copies it out and unmaps: the one place a buffer is mapped, so every
+    /// read-back is counted ([`crate::transfer`]: `range`'s length).
+    pub(crate) fn map_read(
+        &self,
+        staging: &wgpu::Buffer,
+        range: std::ops::Range<u64>,
+        what: &str,
+    ) -> Result<Vec<u8>> {
+        crate::transfer::count_read_back(range.end - range.start);
         let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        staging.map_async(wgpu::MapMode::Read, range.clone(), move |r| {
             let _ = tx.send(r);
         });
         self.wait()?;
         rx.recv()
-            .map_err(|_| Error::Gpu("readback was never completed".into()))?
-            .map_err(|e| Error::Gpu(format!("could not map a buffer for reading: {e}")))?;
+            .map_err(|_| Error::Gpu(format!("read-back of {what} was never completed")))?
+            .map_err(|e| Error::Gpu(format!("could not map {what} for reading: {e}")))?;
         let out = {
             let view = staging
-                .get_mapped_range(..)
-                .map_err(|e| Error::Gpu(format!("could not read a mapped buffer: {e}")))?;
-            let whole = (view.len() / std::mem::size_of::<T>().max(1)) * std::mem::size_of::<T>();
-            bytemuck::pod_collect_to_vec::<u8, T>(&view[..whole])
+                .get_mapped_range(range)
+                .map_err(|e| Error::Gpu(format!("could not read {what} (mapped): {e}")))?;
+            view.to_vec()
         };
         staging.unmap();
         Ok(out)

@@ -2,8 +2,8 @@
 //!
 //! - [`GpuContext`]: adapter choice (hardware first, a software Vulkan such as Mesa lavapipe
 //!   accepted), one device per process, capability checks that turn "too big for this GPU"
-//!   into a typed error instead of a wgpu panic, buffer upload and readback, and cached
-//!   compute pipelines built from WGSL;
+//!   into a typed error instead of a wgpu panic, buffer upload and readback (the only ways,
+//!   each counted per thread by [`transfer`]), and cached compute pipelines built from WGSL;
 //! - [`shader!`]: embeds a WGSL file from the workspace `shaders/` folder, the same way for
 //!   every stage;
 //! - [`GpuTimer`]: per-pass GPU timestamps where the adapter has them, wall clock otherwise;
@@ -16,8 +16,9 @@
 mod context;
 pub mod raster;
 mod timer;
+pub mod transfer;
 
-pub use context::{GpuContext, WORKGROUP_SIZE};
+pub use context::{GpuContext, GpuQueue, WORKGROUP_SIZE};
 pub use timer::{Dispatch, GpuTimer, Timings, compute_pass, record_pass, submit};
 pub use wgpu;
 

@@ -265,11 +265,15 @@ impl TextureReadback {
                 available: limit,
             });
         }
+        // STORAGE too: a consumer on the device may read the copied pixels where they are
+        // (`GpuRasterizer::depth_map_resident`).
         let buffer = checked(ctx, "readback buffer", || {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("imprint texture readback"),
                 size,
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                usage: wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             })
         })?;
@@ -302,8 +306,19 @@ impl TextureReadback {
         );
     }
 
+    /// The buffer the pixels are copied into: rows of [`TextureReadback::padded_row_bytes`],
+    /// top row first (usable as a storage binding).
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Bytes from one row of the copy to the next (a multiple of 256).
+    pub fn padded_row_bytes(&self) -> u32 {
+        self.padded_row
+    }
+
     /// Waits for the GPU and returns the copied pixels, tightly packed, top row first (through
-    /// [`GpuContext::read_buffer`], which maps a staging copy).
+    /// [`GpuContext::read_buffer`], which maps a staging copy and counts it).
     pub fn read(&self, ctx: &GpuContext) -> Result<Vec<u8>> {
         let padded: Vec<u8> = ctx.read_buffer(&self.buffer)?;
         let row = (self.width * self.bytes_per_pixel) as usize;
@@ -509,6 +524,9 @@ impl GpuRasterizer {
     /// `imprint_core::raster::rasterize_depth_with` makes it. Errors: an invalid camera or
     /// mesh (the CPU's messages), a size of 0 or beyond the device's largest texture (naming
     /// the limit), a context other than the one this rasteriser was made with.
+    ///
+    /// The map is read back (its padded rows, 8 bytes a pixel): for CPU consumers. A consumer
+    /// on the device takes [`GpuRasterizer::depth_map_resident`] instead.
     pub fn depth_map(
         &mut self,
         ctx: &GpuContext,
@@ -518,6 +536,24 @@ impl GpuRasterizer {
         height: u32,
         opts: &RasterOptions,
     ) -> Result<DepthMap> {
+        self.depth_map_resident(ctx, mesh, camera, width, height, opts)?
+            .to_cpu(ctx)
+    }
+
+    /// [`GpuRasterizer::depth_map`] left on the device: the same render and the same copy of
+    /// its texels into a buffer, which a consumer's passes read where it is (nothing is read
+    /// back). The map lives in this rasteriser's buffer: it borrows the rasteriser, so the
+    /// next map cannot be rendered over it while it is in use; a consumer submits its passes
+    /// before asking for the next map (the queue runs them in order).
+    pub fn depth_map_resident(
+        &mut self,
+        ctx: &GpuContext,
+        mesh: &Mesh,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        opts: &RasterOptions,
+    ) -> Result<GpuDepthMap<'_>> {
         if ctx.device != self.device {
             return Err(Error::Invalid(
                 "GpuRasterizer used with another GPU context than it was made with".into(),
@@ -578,8 +614,43 @@ impl GpuRasterizer {
         }
         target.readback.copy(&mut encoder, &target.color_texture);
         ctx.queue.submit([encoder.finish()]);
-        let texels: Vec<[f32; 2]> = bytemuck::pod_collect_to_vec(&target.readback.read(ctx)?);
-        let mut map = DepthMap::empty(*camera, width, height);
+        Ok(GpuDepthMap {
+            camera: *camera,
+            width,
+            height,
+            row_texels: target.readback.padded_row_bytes() / 8,
+            readback: &target.readback,
+        })
+    }
+}
+
+/// A depth map on the device ([`GpuRasterizer::depth_map_resident`]): per texel
+/// `vec2<f32>` (view depth, coverage), exactly the render target's values; a texel is
+/// covered when its coverage is above 0.5, and its depth is then the map's depth (what
+/// [`GpuRasterizer::depth_map`] reads back and decodes: consumers on the device copy the same
+/// floats). Row 0 is the top row; texel (x, y) is element `y * row_texels + x` of
+/// [`GpuDepthMap::texels`].
+#[derive(Debug)]
+pub struct GpuDepthMap<'a> {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    /// Elements from one row to the next (rows are padded to 256 bytes).
+    pub row_texels: u32,
+    readback: &'a TextureReadback,
+}
+
+impl GpuDepthMap<'_> {
+    /// The texels (`array<vec2<f32>>`, bindable as storage).
+    pub fn texels(&self) -> &wgpu::Buffer {
+        self.readback.buffer()
+    }
+
+    /// Read back and decoded as the CPU's [`DepthMap`] (for CPU consumers, writers and tests;
+    /// counted as a read-back of the padded rows).
+    pub fn to_cpu(&self, ctx: &GpuContext) -> Result<DepthMap> {
+        let texels: Vec<[f32; 2]> = bytemuck::pod_collect_to_vec(&self.readback.read(ctx)?);
+        let mut map = DepthMap::empty(self.camera, self.width, self.height);
         for ((d, c), t) in map.depth.iter_mut().zip(&mut map.coverage).zip(&texels) {
             if t[1] > 0.5 {
                 *d = t[0];

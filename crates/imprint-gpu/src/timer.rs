@@ -107,31 +107,16 @@ impl GpuTimer {
         let labels = std::mem::take(&mut self.labels);
         let mut passes = Vec::new();
         if let (Some(q), false) = (&self.queries, labels.is_empty()) {
-            let (tx, rx) = std::sync::mpsc::channel();
             let bytes = labels.len() as u64 * 16;
-            q.readback
-                .map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-                    let _ = tx.send(r);
-                });
-            ctx.wait()?;
-            rx.recv()
-                .map_err(|_| Error::Gpu("timestamp readback never completed".into()))?
-                .map_err(|e| Error::Gpu(format!("could not map timestamps: {e}")))?;
-            {
-                let view = q
-                    .readback
-                    .get_mapped_range(0..bytes)
-                    .map_err(|e| Error::Gpu(format!("could not read timestamps: {e}")))?;
-                let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&view[..]);
-                for (i, label) in labels.into_iter().enumerate() {
-                    let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
-                    passes.push((
-                        label,
-                        Duration::from_nanos((dt as f64 * self.period_ns) as u64),
-                    ));
-                }
+            let raw = ctx.map_read(&q.readback, 0..bytes, "timestamps")?;
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&raw);
+            for (i, label) in labels.into_iter().enumerate() {
+                let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
+                passes.push((
+                    label,
+                    Duration::from_nanos((dt as f64 * self.period_ns) as u64),
+                ));
             }
-            q.readback.unmap();
         }
         Ok(Timings { passes, wall })
     }

@@ -3,20 +3,26 @@
 //!
 //! Flow: [`plan::load`] parses and validates a file into a [`plan::Plan`] (every edge typed
 //! and checked, every value range checked, assets found, memory estimated) before anything
-//! runs; [`exec::run`] executes it and returns a [`report::Report`].
+//! runs; an [`Executor`] runs it frame by frame ([`exec::run`]: a whole run into a folder)
+//! and returns a [`report::Report`]. Each node kind is a module of [`nodes`] implementing the
+//! traits of [`node`]; `docs/architecture.md` says how a frame runs.
 
 pub mod diagnostics;
 pub mod exec;
-pub mod field_stage;
+pub mod executor;
+pub mod node;
+pub mod nodes;
 pub mod overrides;
 pub mod plan;
 pub mod report;
 pub mod rig;
 pub mod schedule;
 pub mod schema;
-pub mod skin_stage;
+mod table;
+pub mod value;
 
 pub use diagnostics::PipelineError;
+pub use executor::Executor;
 pub use plan::{Plan, load, parse};
 
 /// What can go wrong with a pipeline: an invalid file (exit 2) or a stage's error.

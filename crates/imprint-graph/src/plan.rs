@@ -2,7 +2,8 @@
 
 use crate::diagnostics::{Source, ron_error};
 use crate::overrides::apply_override;
-use crate::schema::{Backend, GridChoice, HeightGrid, NodeSpec, PipelineFile, PortType};
+use crate::node::CheckCtx;
+use crate::schema::{PipelineFile, PortType};
 use crate::{Error, Result};
 use petgraph::algo::{kosaraju_scc, toposort};
 use petgraph::graph::{DiGraph, NodeIndex};
@@ -18,6 +19,8 @@ pub struct Plan {
     pub base_dir: PathBuf,
     /// Nodes that run, in dependency order.
     pub order: Vec<String>,
+    /// Every node of the file, in dependency order.
+    pub topo: Vec<String>,
     /// Nodes that do not run, with the reason.
     pub pruned: Vec<(String, String)>,
     /// What the user should know before running (a writer that lost its input…).
@@ -84,7 +87,8 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
         .map(|n| (n.as_str(), graph.add_node(n.as_str())))
         .collect();
     for (name, node) in &file.nodes {
-        for (port, input, _) in node.inputs() {
+        for p in node.inputs() {
+            let (port, input) = (p.port, p.node);
             if !file.nodes.contains_key(input) {
                 let help = closest_name(input, &names).map_or_else(
                     || format!("nodes in this file: {}", join(&names)),
@@ -131,8 +135,10 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
         }
     };
 
+    let lookup = |n: &str| file.nodes.get(n).map(|s| s.node());
     for (name, node) in &file.nodes {
-        for (port, input, expected) in node.inputs() {
+        for p in node.inputs() {
+            let (port, input, expected) = (p.port, p.node, p.ty);
             let producer = &file.nodes[input];
             if producer.output() != Some(expected) {
                 let what = producer
@@ -151,7 +157,14 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
                     .into());
             }
         }
-        check_values(&source, name, node, base_dir)?;
+        node.node().check(&CheckCtx {
+            source: &source,
+            name,
+            base_dir,
+            fps: file.fps,
+            frames: file.frames,
+            lookup: &lookup,
+        })?;
         check_schedule(&source, name, &file)?;
     }
 
@@ -200,7 +213,7 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             .filter(runs)
             .collect();
         let reader = |c: &NodeIndex| match &file.nodes[graph[*c]] {
-            NodeSpec::DistanceField(f) if f.interpolate => Some(graph[*c].to_string()),
+            node if node.schedule().interpolate => Some(graph[*c].to_string()),
             _ => ahead.get(c).cloned(),
         };
         let readers: Option<Vec<String>> = consumers.iter().map(reader).collect();
@@ -208,6 +221,7 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             ahead.insert(n, r[0].clone());
         }
     }
+    let topo: Vec<String> = order.iter().map(|&n| graph[n].to_string()).collect();
     let mut run_order = Vec::new();
     let mut pruned = Vec::new();
     for n in order {
@@ -235,247 +249,14 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
         file,
         base_dir: base_dir.to_path_buf(),
         order: run_order,
+        topo,
         pruned,
         warnings,
     })
 }
 
-/// Ranges and assets, checked before anything runs.
-fn check_values(source: &Source, name: &str, node: &NodeSpec, base_dir: &Path) -> Result<()> {
-    let fail = |field: &str, msg: String| -> Error {
-        source
-            .error(
-                source.field_span(name, field),
-                format!("node '{name}': {msg}"),
-                "invalid value",
-                None,
-            )
-            .into()
-    };
-    match node {
-        NodeSpec::Mesh(m) => {
-            m.validate().map_err(|e| fail("motion", e.to_string()))?;
-            if let Some(p) = &m.path {
-                let full = base_dir.join(p);
-                if !full.is_file() {
-                    return Err(source
-                        .error(
-                            source.field_span(name, "path"),
-                            format!("node '{name}': mesh file not found: {}", full.display()),
-                            "missing file",
-                            Some("paths are relative to the pipeline file's folder".into()),
-                        )
-                        .into());
-                }
-            }
-        }
-        NodeSpec::Voxelize(v) => match &v.grid {
-            GridChoice::Fit {
-                resolution,
-                padding,
-            } => {
-                if *resolution == 0 {
-                    return Err(fail(
-                        "grid",
-                        "grid resolution must be at least 1, got 0".into(),
-                    ));
-                }
-                if *resolution > imprint_core::grid::MAX_AXIS_CELLS {
-                    let r = *resolution as u64;
-                    return Err(fail(
-                        "grid",
-                        format!(
-                            "a {r}^3 grid would need {} (resolution at most {})",
-                            imprint_core::error::human_bytes(r * r * r * 17),
-                            imprint_core::grid::MAX_AXIS_CELLS
-                        ),
-                    ));
-                }
-                if !(padding.is_finite() && *padding >= 0.0) {
-                    return Err(fail(
-                        "grid",
-                        format!("grid padding must be finite and >= 0, got {padding}"),
-                    ));
-                }
-            }
-            GridChoice::Explicit { origin, cell, dims } => {
-                let o = glam::Vec3::new(origin.0, origin.1, origin.2);
-                let d = glam::UVec3::new(dims.0, dims.1, dims.2);
-                imprint_core::GridSpec::new(o, *cell, d)
-                    .map_err(|e| fail("grid", e.to_string()))?;
-            }
-        },
-        NodeSpec::DistanceField(f) => {
-            if !(f.band.is_finite() && f.band > 0.0) {
-                return Err(fail(
-                    "band",
-                    format!("band must be a finite number of cells > 0, got {}", f.band),
-                ));
-            }
-            if let crate::schema::Measure::Every(0) = f.measure {
-                return Err(fail("measure", "Every(k) needs k >= 1".into()));
-            }
-        }
-        NodeSpec::Render(r) => {
-            if !r.out.contains("{frame") {
-                return Err(fail(
-                    "out",
-                    format!(
-                        "out pattern '{}' has no {{frame}} or {{frame:04}}: every frame would overwrite the last",
-                        r.out
-                    ),
-                ));
-            }
-            if r.objects.is_empty() {
-                return Err(fail(
-                    "objects",
-                    "a Render node needs at least one object".into(),
-                ));
-            }
-            crate::exec::render_options(r, 0.0).map_err(|e| fail("camera", e.to_string()))?;
-            if let Some(c) = &r.contact_sheet {
-                if c.every == 0 {
-                    return Err(fail("contact_sheet", "every must be at least 1".into()));
-                }
-                imprint_render::sequence::ContactSheet::new(c.columns, c.width)
-                    .map_err(|e| fail("contact_sheet", e.to_string()))?;
-            }
-            if let Some(g) = &r.gif {
-                if g.every == 0 {
-                    return Err(fail("gif", "every must be at least 1".into()));
-                }
-                // Only checks the values: nothing is created before the first frame.
-                imprint_render::sequence::GifWriter::create(Path::new(&g.path), g.width, 1.0)
-                    .map_err(|e| fail("gif", e.to_string()))?;
-            }
-        }
-        NodeSpec::Heightmap(h) => match h.grid {
-            HeightGrid::Fit {
-                resolution,
-                padding,
-            } => {
-                let max = imprint_core::raster::MAX_SIZE;
-                if resolution == 0 || resolution > max {
-                    return Err(fail(
-                        "grid",
-                        format!("resolution must be in 1..={max}, got {resolution}"),
-                    ));
-                }
-                if !(padding.is_finite() && padding >= 0.0) {
-                    return Err(fail(
-                        "grid",
-                        format!("grid padding must be finite and >= 0, got {padding}"),
-                    ));
-                }
-                if !h.empty.is_finite() {
-                    return Err(fail(
-                        "empty",
-                        format!("empty must be finite, got {}", h.empty),
-                    ));
-                }
-            }
-            HeightGrid::Explicit { origin, cell, dims } => {
-                imprint_stages::depth::HeightRegion::new(
-                    glam::Vec2::new(origin.0, origin.1),
-                    cell,
-                    glam::UVec2::new(dims.0, dims.1),
-                    h.empty,
-                )
-                .map_err(|e| fail("grid", e.to_string()))?;
-            }
-        },
-        NodeSpec::Cloth(c) => {
-            c.params
-                .validate()
-                .map_err(|e| fail("params", e.to_string()))?;
-            for d in &c.depth_colliders {
-                d.params
-                    .validate()
-                    .map_err(|e| fail("depth_colliders", e.to_string()))?;
-            }
-            if !c.depth_colliders.is_empty() && c.backend == Some(Backend::Gpu) {
-                return Err(fail(
-                    "backend",
-                    "the GPU cloth reads distance-field colliders only; a cloth with \
-                     depth_colliders runs on the CPU (set backend: Cpu, or leave it out)"
-                        .into(),
-                ));
-            }
-        }
-        NodeSpec::WriteHeightmap(w) => {
-            if w.formats.is_empty() {
-                return Err(fail(
-                    "formats",
-                    "list at least one of Png16, Exr, Npy, Preview".into(),
-                ));
-            }
-        }
-        NodeSpec::WriteField(_) | NodeSpec::WriteMesh(_) => {}
-        NodeSpec::Skin(k) => {
-            let full = base_dir.join(&k.rig);
-            if !full.is_file() {
-                return Err(fail(
-                    "rig",
-                    format!("rig file not found: {}", full.display()),
-                ));
-            }
-            // The rig file's own errors name its file, line and column.
-            let loaded = crate::rig::load(&full)?;
-            if k.mesh.is_none() && loaded.mesh.is_none() {
-                return Err(fail(
-                    "mesh",
-                    format!(
-                        "give the Mesh node to skin (mesh: \"...\"), or bind one in {} (mesh: \"file.obj\")",
-                        full.display()
-                    ),
-                ));
-            }
-            let offset = glam::Vec3::from(k.offset);
-            if !offset.is_finite() {
-                return Err(fail("offset", format!("offset {offset} must be finite")));
-            }
-            match &k.method {
-                crate::schema::SkinMethod::Particles(p) => p.validate(),
-                crate::schema::SkinMethod::Linear { weights }
-                | crate::schema::SkinMethod::DualQuaternion { weights } => weights.validate(),
-            }
-            .map_err(|e| fail("method", e.to_string()))?;
-        }
-        NodeSpec::Drape(d) => {
-            d.params
-                .validate()
-                .map_err(|e| fail("params", e.to_string()))?;
-        }
-        NodeSpec::Snow(n) => {
-            n.params
-                .validate()
-                .map_err(|e| fail("params", e.to_string()))?;
-            if n.meshes.is_empty() {
-                return Err(fail("meshes", "a Snow node needs at least one mesh".into()));
-            }
-            if let Some(g) = &n.ground {
-                crate::exec::snow_ground(g).map_err(|e| fail("ground", e.to_string()))?;
-            }
-        }
-        NodeSpec::Ground(g) => {
-            g.params
-                .validate()
-                .map_err(|e| fail("params", e.to_string()))?;
-            if let imprint_stages::ground::Initial::Image { path, .. } = &g.params.initial {
-                let full = base_dir.join(path);
-                if !full.is_file() {
-                    return Err(fail(
-                        "params",
-                        format!("initial height image not found: {}", full.display()),
-                    ));
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
-/// `every`, `offset`, `split` and `interpolate` (see [`crate::schedule`]).
+/// `every`, `offset` and `split` (see [`crate::schedule`]); a field's `interpolate` is
+/// checked by its node.
 fn check_schedule(source: &Source, name: &str, file: &PipelineFile) -> Result<()> {
     let node = &file.nodes[name];
     let sc = node.schedule();
@@ -512,26 +293,6 @@ fn check_schedule(source: &Source, name: &str, file: &PipelineFile) -> Result<()
             ),
             Some(format!("raise every to at least {}", sc.split.max(1))),
         ));
-    }
-    if sc.interpolate
-        && let NodeSpec::DistanceField(f) = node
-    {
-        let NodeSpec::Voxelize(v) = &file.nodes[&f.boundary] else {
-            unreachable!("edges are typed")
-        };
-        if !matches!(file.nodes[&v.mesh], NodeSpec::Mesh(_)) {
-            return Err(fail(
-                "interpolate",
-                format!(
-                    "interpolate builds fields ahead of time from the mesh at a later time, but \
-                     '{}' reads '{}', a {} node computed frame by frame",
-                    f.boundary,
-                    v.mesh,
-                    file.nodes[&v.mesh].kind()
-                ),
-                Some("interpolate fields of Mesh nodes only, or use every without it".into()),
-            ));
-        }
     }
     Ok(())
 }
@@ -607,7 +368,8 @@ impl Plan {
             );
         }
         for (name, node) in &self.file.nodes {
-            for (port, input, t) in node.inputs() {
+            for p in node.inputs() {
+                let (input, port, t) = (p.node, p.port, p.ty);
                 s += &format!("  \"{input}\" -> \"{name}\" [label=\"{port}: {t}\"];\n");
             }
         }

@@ -1,9 +1,9 @@
 //! Per-node timing and metrics, collected every frame and written as `report.json`.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct NodeReport {
     pub kind: String,
     /// "cpu" or "gpu".
@@ -17,10 +17,28 @@ pub struct NodeReport {
     pub mean_ms: f64,
     pub max_ms: f64,
     /// Time spent measuring error against the exact reference (not part of the stage's time).
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub measure_ms: f64,
+    /// Bytes moved between host and GPU, per frame that moved any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub transfers: Vec<FrameTransfers>,
     /// The stage's own figures (boundary points, band cells, error in cells, files written…).
     pub metrics: BTreeMap<String, serde_json::Value>,
+}
+
+/// Bytes a node moved between host and GPU on one frame.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct FrameTransfers {
+    pub frame: u32,
+    pub uploaded_bytes: u64,
+    pub read_back_bytes: u64,
+    /// Distance fields read back from the GPU.
+    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    pub field_read_backs: u64,
+}
+
+fn is_zero_u64(v: &u64) -> bool {
+    *v == 0
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -37,7 +55,7 @@ impl NodeReport {
     }
 }
 
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Report {
     pub pipeline: String,
     pub frames: Vec<u32>,
@@ -51,6 +69,15 @@ pub struct Report {
     pub nodes: BTreeMap<String, NodeReport>,
     pub pruned: Vec<(String, String)>,
     pub files_written: usize,
+    /// What the user should know (also printed by the binary).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+    /// Why the run stopped early, when it did (the frames above are those done).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The frame the run resumed at, when it continued from a checkpoint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resumed_at: Option<u32>,
 }
 
 impl Report {

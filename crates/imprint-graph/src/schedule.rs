@@ -14,10 +14,6 @@
 //!   K), and its parts run on the `split` frames ending there, from the mesh at K's own time.
 //!   The blend adds no lag; it costs a third field in memory while the next build is under way.
 
-use crate::plan::Plan;
-use crate::schema::NodeSpec;
-use std::collections::{BTreeMap, BTreeSet};
-
 /// A node's schedule. Frames are signed: an interpolated node's first segment may start at
 /// a keyframe before frame 0 (its mesh is a function of time, so that is fine).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,6 +36,15 @@ impl Default for Schedule {
 }
 
 impl Schedule {
+    /// Keyframes every `every` frames from `offset`, whole builds, no interpolation.
+    pub fn every(every: u32, offset: u32) -> Self {
+        Schedule {
+            every,
+            offset,
+            ..Schedule::default()
+        }
+    }
+
     fn k(&self) -> i64 {
         self.every.max(1) as i64
     }
@@ -80,199 +85,6 @@ impl Schedule {
             .map(|p| (frame + k + s - 2 - p, p as u32))
             .find(|&(key, _)| self.is_key(key))
     }
-}
-
-impl NodeSpec {
-    /// The node's schedule as the file sets it (nodes without those fields: every frame).
-    pub fn schedule(&self) -> Schedule {
-        let (every, offset) = match self {
-            NodeSpec::Voxelize(v) => (v.every, v.offset),
-            NodeSpec::DistanceField(f) => (f.every, f.offset),
-            NodeSpec::Heightmap(h) => (h.every, h.offset),
-            NodeSpec::WriteField(w) => (w.every, w.offset),
-            NodeSpec::WriteMesh(w) => (w.every, w.offset),
-            NodeSpec::WriteHeightmap(w) => (w.every, w.offset),
-            NodeSpec::Render(r) => (r.every, r.offset),
-            NodeSpec::Mesh(_)
-            | NodeSpec::Cloth(_)
-            | NodeSpec::Ground(_)
-            | NodeSpec::Snow(_)
-            | NodeSpec::Drape(_)
-            | NodeSpec::Skin(_) => (1, 0),
-        };
-        let (split, interpolate) = match self {
-            NodeSpec::DistanceField(f) => (f.split, f.interpolate),
-            _ => (1, false),
-        };
-        Schedule {
-            every,
-            offset,
-            split,
-            interpolate,
-        }
-    }
-
-    /// `enabled` as the file sets it.
-    pub fn enabled(&self) -> bool {
-        match self {
-            NodeSpec::Mesh(m) => m.enabled,
-            NodeSpec::Voxelize(v) => v.enabled,
-            NodeSpec::DistanceField(f) => f.enabled,
-            NodeSpec::Heightmap(h) => h.enabled,
-            NodeSpec::Cloth(c) => c.enabled,
-            NodeSpec::WriteField(w) => w.enabled,
-            NodeSpec::WriteMesh(w) => w.enabled,
-            NodeSpec::WriteHeightmap(w) => w.enabled,
-            NodeSpec::Render(r) => r.enabled,
-            NodeSpec::Ground(g) => g.enabled,
-            NodeSpec::Snow(n) => n.enabled,
-            NodeSpec::Drape(d) => d.enabled,
-            NodeSpec::Skin(k) => k.enabled,
-        }
-    }
-}
-
-impl Plan {
-    /// Nodes that compute once: every mesh upstream of them is static (no motion that depends
-    /// on time), so their inputs never change after the first frame.
-    pub fn static_nodes(&self) -> BTreeSet<String> {
-        let mut out = BTreeSet::new();
-        let nodes = &self.file.nodes;
-        let mut all: Vec<&String> = self.order.iter().collect();
-        // Meshes read ahead by interpolated fields do not run, but decide those fields.
-        for (n, _) in &self.pruned {
-            if let NodeSpec::Mesh(_) = nodes[n] {
-                all.insert(0, n);
-            }
-        }
-        for name in all {
-            let node = &nodes[name];
-            let is_static = match node {
-                NodeSpec::Mesh(m) => m.motion.iter().all(|mo| mo.is_time_invariant()),
-                NodeSpec::Cloth(_)
-                | NodeSpec::Ground(_)
-                | NodeSpec::Snow(_)
-                | NodeSpec::Skin(_) => false,
-                NodeSpec::DistanceField(f) if f.interpolate => {
-                    let NodeSpec::Voxelize(v) = &nodes[&f.boundary] else {
-                        unreachable!("edges are typed")
-                    };
-                    matches!(&nodes[&v.mesh], NodeSpec::Mesh(m) if m.motion.iter().all(|mo| mo.is_time_invariant()))
-                }
-                _ => {
-                    !node.inputs().is_empty()
-                        && node.inputs().iter().all(|(_, i, _)| out.contains(*i))
-                }
-            };
-            if is_static {
-                out.insert(name.clone());
-            }
-        }
-        out
-    }
-
-    /// `imprint check`'s schedule: per running node, what it does on each of the first
-    /// `frames` frames, found by the executor's rules (a node computes on its keyframes when
-    /// an input has a new value): `#` computes, `1`…`9` runs that part of a split build,
-    /// `w` writes, `.` reuses its last result (interpolated: blends its two builds).
-    pub fn schedule_table(&self, frames: u32) -> String {
-        let statics = self.static_nodes();
-        let nodes = &self.file.nodes;
-        let n = frames.min(self.file.frames) as i64;
-        let mut rows: BTreeMap<&str, String> = BTreeMap::new();
-        let mut version: BTreeMap<&str, u64> = BTreeMap::new();
-        let mut seen: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
-        // Split builds under way: node -> next part.
-        let mut jobs: BTreeMap<&str, u32> = BTreeMap::new();
-        for f in 0..n {
-            for name in &self.order {
-                let name = name.as_str();
-                let node = &nodes[name];
-                let sc = node.schedule();
-                let inputs: Vec<u64> = node
-                    .inputs()
-                    .iter()
-                    .map(|(_, i, _)| version.get(i).copied().unwrap_or(0))
-                    .collect();
-                let changed = seen.get(name) != Some(&inputs);
-                let first = f == 0;
-                let (c, publish, began) = if node.is_writer() {
-                    (if sc.is_key(f) { 'w' } else { '.' }, false, false)
-                } else if statics.contains(name) {
-                    if first {
-                        ('#', true, true)
-                    } else {
-                        ('.', false, false)
-                    }
-                } else if matches!(
-                    node,
-                    NodeSpec::Mesh(_)
-                        | NodeSpec::Cloth(_)
-                        | NodeSpec::Ground(_)
-                        | NodeSpec::Snow(_)
-                        | NodeSpec::Skin(_)
-                ) {
-                    ('#', true, true)
-                } else if sc.interpolate {
-                    // Frame 0 builds its segment's two keyframes whole; later ones in parts.
-                    let bootstrap = sc.key_at_or_before(0) + sc.every as i64;
-                    let c = match sc.ahead_part_at(f) {
-                        _ if first => '#',
-                        Some((k, _)) if k <= bootstrap => '.',
-                        Some((_, p)) if sc.split > 1 => part_char(p),
-                        Some(_) => '#',
-                        None => '.',
-                    };
-                    (c, true, c != '.')
-                } else if let Some(p) = jobs.get(name).copied() {
-                    if p + 1 == sc.split {
-                        jobs.remove(name);
-                    } else {
-                        jobs.insert(name, p + 1);
-                    }
-                    (part_char(p), p + 1 == sc.split, false)
-                } else if first || (sc.is_key(f) && changed) {
-                    if !first && sc.split > 1 {
-                        jobs.insert(name, 1);
-                        ('1', false, true)
-                    } else {
-                        ('#', true, true)
-                    }
-                } else {
-                    ('.', false, false)
-                };
-                if began {
-                    seen.insert(name, inputs);
-                }
-                if publish {
-                    *version.entry(name).or_default() += 1;
-                }
-                rows.entry(name).or_default().push(c);
-            }
-        }
-        let width = self.order.iter().map(|s| s.len()).max().unwrap_or(4).max(4);
-        let ruler: String = (0..n)
-            .map(|f| if f % 10 == 0 { '|' } else { ' ' })
-            .collect();
-        let mut s = format!("{:<width$}  {ruler}  (frames 0..{n}; | every 10)\n", "node");
-        for name in &self.order {
-            let sc = nodes[name].schedule();
-            let what = match (sc.interpolate, sc.split, sc.every) {
-                _ if statics.contains(name) => "static: computes once".to_string(),
-                (true, s, k) => format!("every {k}, split {s}, interpolated (built {k} ahead)"),
-                (false, s, k) if s > 1 => format!("every {k}, split {s} (ready {} later)", s - 1),
-                (false, _, 1) => String::new(),
-                (false, _, k) => format!("every {k}, offset {}", sc.offset),
-            };
-            s += &format!("{name:<width$}  {}  {what}\n", rows[name.as_str()]);
-        }
-        s += "# computes, 1-9 part of a split build, w writes, . reuses (interpolated: blends)\n";
-        s
-    }
-}
-
-fn part_char(p: u32) -> char {
-    char::from_digit(p + 1, 36).unwrap_or('+')
 }
 
 #[cfg(test)]

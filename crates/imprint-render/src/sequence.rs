@@ -2,9 +2,13 @@
 //! frame as a labelled thumbnail in one PNG) and an **animated GIF** preview.
 //!
 //! Both take frames as they are rendered, so a long run never holds its full-size frames:
-//! the contact sheet keeps only thumbnails, and the GIF is encoded frame by frame into an
-//! [`AtomicFile`] that appears under its final name only when [`GifWriter::finish`] succeeds
-//! (a run that fails half-way leaves no truncated GIF behind).
+//! the contact sheet keeps only thumbnails, and the GIF keeps each frame quantised and
+//! compressed, in memory. Nothing is written before the end: [`GifWriter::finish`] writes
+//! the whole GIF at once, atomically, so a run that fails or is killed half-way leaves no
+//! file at all (not even a temporary one).
+//!
+//! Both are serde values (a run's checkpoint holds them): a writer loaded from a checkpoint
+//! and given the remaining frames writes the same bytes as one that never stopped.
 //!
 //! Thumbnails are area-averaged downscales (`image::imageops::thumbnail`) and the GIF palette
 //! is NeuQuant's (the `gif` crate): both deterministic, so the same frames give the same bytes.
@@ -12,8 +16,10 @@
 use crate::font::{draw_text, text_height};
 use crate::png::write_png;
 use image::{Rgb, RgbImage, imageops};
-use imprint_core::io::AtomicFile;
+use imprint_core::io::atomic_write_bytes;
 use imprint_core::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::path::Path;
 
 /// Largest thumbnail or GIF width accepted, in pixels.
@@ -46,12 +52,39 @@ fn check_width(what: &str, width: u32) -> Result<()> {
     Ok(())
 }
 
+/// Serde for an [`RgbImage`] (which has none): `(width, height, raw RGB bytes)`.
+mod rgb_image {
+    use image::RgbImage;
+    use serde::de::Error as _;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(img: &RgbImage, s: S) -> Result<S::Ok, S::Error> {
+        (img.width(), img.height(), img.as_raw()).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<RgbImage, D::Error> {
+        let (w, h, raw) = <(u32, u32, Vec<u8>)>::deserialize(d)?;
+        let len = raw.len();
+        RgbImage::from_raw(w, h, raw).ok_or_else(|| {
+            D::Error::custom(format!("an RGB image of {w}x{h} pixels with {len} bytes"))
+        })
+    }
+}
+
+/// One thumbnail of a [`ContactSheet`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Tile {
+    frame: u32,
+    #[serde(with = "rgb_image")]
+    image: RgbImage,
+}
+
 /// A grid of every k-th frame in one picture, each tile labelled with its frame number.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ContactSheet {
     columns: u32,
     thumb_width: u32,
-    tiles: Vec<(u32, RgbImage)>,
+    tiles: Vec<Tile>,
 }
 
 /// Gap between tiles and around the sheet, in pixels.
@@ -78,7 +111,10 @@ impl ContactSheet {
 
     /// Adds frame `frame` (kept as a thumbnail only).
     pub fn push(&mut self, frame: u32, img: &RgbImage) {
-        self.tiles.push((frame, downscale(img, self.thumb_width)));
+        self.tiles.push(Tile {
+            frame,
+            image: downscale(img, self.thumb_width),
+        });
     }
 
     pub fn len(&self) -> usize {
@@ -93,15 +129,15 @@ impl ContactSheet {
     /// `f <frame>` in its top-left corner. Tiles of differing sizes are placed at the largest
     /// size's pitch. `None` when no frame was pushed.
     pub fn compose(&self) -> Option<RgbImage> {
-        let tw = self.tiles.iter().map(|(_, t)| t.width()).max()?;
-        let th = self.tiles.iter().map(|(_, t)| t.height()).max()?;
+        let tw = self.tiles.iter().map(|t| t.image.width()).max()?;
+        let th = self.tiles.iter().map(|t| t.image.height()).max()?;
         let n = self.tiles.len() as u32;
         let cols = self.columns.min(n);
         let rows = n.div_ceil(cols);
         let mut sheet =
             RgbImage::from_pixel(GAP + cols * (tw + GAP), GAP + rows * (th + GAP), SHEET_BG);
         let scale = if tw >= 240 { 2 } else { 1 };
-        for (k, (frame, tile)) in self.tiles.iter().enumerate() {
+        for (k, Tile { frame, image: tile }) in self.tiles.iter().enumerate() {
             let (c, r) = (k as u32 % cols, k as u32 / cols);
             let (x, y) = (GAP + c * (tw + GAP), GAP + r * (th + GAP));
             imageops::replace(&mut sheet, tile, x as i64, y as i64);
@@ -139,24 +175,85 @@ impl ContactSheet {
     }
 }
 
-/// An animated GIF written frame by frame; see the module doc.
+/// One GIF frame as the file will hold it: a `gif::Frame` quantised (palette and indices)
+/// and its indices LZW-compressed (`Frame::make_lzw_pre_encoded`, the compression
+/// `Encoder::write_frame` applies), so the file written at the end has the bytes a streaming
+/// encoder would have written.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct EncodedFrame {
+    delay: u16,
+    /// `gif::DisposalMethod` as its number.
+    dispose: u8,
+    transparent: Option<u8>,
+    needs_user_input: bool,
+    top: u16,
+    left: u16,
+    width: u16,
+    height: u16,
+    interlaced: bool,
+    palette: Option<Vec<u8>>,
+    /// Minimum code size, then the LZW data.
+    lzw: Vec<u8>,
+}
+
+impl EncodedFrame {
+    fn new(mut frame: gif::Frame<'_>) -> Self {
+        frame.make_lzw_pre_encoded();
+        EncodedFrame {
+            delay: frame.delay,
+            dispose: frame.dispose as u8,
+            transparent: frame.transparent,
+            needs_user_input: frame.needs_user_input,
+            top: frame.top,
+            left: frame.left,
+            width: frame.width,
+            height: frame.height,
+            interlaced: frame.interlaced,
+            palette: frame.palette,
+            lzw: frame.buffer.into_owned(),
+        }
+    }
+
+    /// The frame, its buffer LZW-encoded (for `Encoder::write_lzw_pre_encoded_frame`).
+    fn frame(&self) -> gif::Frame<'_> {
+        gif::Frame {
+            delay: self.delay,
+            dispose: gif::DisposalMethod::from_u8(self.dispose)
+                .unwrap_or(gif::DisposalMethod::Keep),
+            transparent: self.transparent,
+            needs_user_input: self.needs_user_input,
+            top: self.top,
+            left: self.left,
+            width: self.width,
+            height: self.height,
+            interlaced: self.interlaced,
+            palette: self.palette.clone(),
+            buffer: Cow::Borrowed(&self.lzw),
+        }
+    }
+}
+
+/// An animated GIF taken frame by frame and written whole by [`GifWriter::finish`]; see the
+/// module doc. Memory: each frame's palette and compressed indices (a few KiB to a few tens
+/// of KiB per preview frame).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GifWriter {
-    encoder: Option<gif::Encoder<AtomicFile>>,
     path: std::path::PathBuf,
     width: u32,
     size: Option<(u16, u16)>,
     /// Frame delay in hundredths of a second.
     delay_cs: u16,
-    frames: u32,
+    frames: Vec<EncodedFrame>,
 }
 
 /// NeuQuant sampling factor (1 = best, 30 = fastest); 10 is `gif`'s own default trade-off.
 const GIF_SPEED: i32 = 10;
 
 impl GifWriter {
-    /// Starts `path`: frames are scaled to `width` pixels wide and shown `seconds_per_frame`
-    /// each (GIF delays are whole hundredths of a second, at least 0.02 s so that viewers
-    /// do not slow them down), looping forever.
+    /// Starts a GIF for `path` (nothing is written before [`GifWriter::finish`]): frames are
+    /// scaled to `width` pixels wide and shown `seconds_per_frame` each (GIF delays are whole
+    /// hundredths of a second, at least 0.02 s so that viewers do not slow them down),
+    /// looping forever.
     pub fn create(path: &Path, width: u32, seconds_per_frame: f32) -> Result<Self> {
         check_width("gif", width)?;
         if !(seconds_per_frame.is_finite() && seconds_per_frame > 0.0) {
@@ -166,12 +263,11 @@ impl GifWriter {
         }
         let delay_cs = (seconds_per_frame * 100.0).round().clamp(2.0, 65535.0) as u16;
         Ok(GifWriter {
-            encoder: None,
             path: path.to_path_buf(),
             width,
             size: None,
             delay_cs,
-            frames: 0,
+            frames: Vec::new(),
         })
     }
 
@@ -182,7 +278,8 @@ impl GifWriter {
         }
     }
 
-    /// Appends one frame. Every frame must have the first frame's size after scaling.
+    /// Appends one frame (quantised and compressed now, kept in memory). Every frame must
+    /// have the first frame's size after scaling.
     pub fn push(&mut self, img: &RgbImage) -> Result<()> {
         let small = downscale(img, self.width);
         let (w, h) = small.dimensions();
@@ -194,15 +291,7 @@ impl GifWriter {
             )));
         }
         match self.size {
-            None => {
-                let file = AtomicFile::create(&self.path)?;
-                let mut enc =
-                    gif::Encoder::new(file, w16, h16, &[]).map_err(|e| self.gif_err(e))?;
-                enc.set_repeat(gif::Repeat::Infinite)
-                    .map_err(|e| self.gif_err(e))?;
-                self.encoder = Some(enc);
-                self.size = Some((w16, h16));
-            }
+            None => self.size = Some((w16, h16)),
             Some(size) if size != (w16, h16) => {
                 return Err(Error::Invalid(format!(
                     "{}: gif frame is {w}x{h} after scaling, the first was {}x{}",
@@ -215,29 +304,38 @@ impl GifWriter {
         }
         let mut frame = gif::Frame::from_rgb_speed(w16, h16, small.as_raw(), GIF_SPEED);
         frame.delay = self.delay_cs;
-        let enc = self.encoder.as_mut().expect("created above");
-        let r = enc.write_frame(&frame);
-        r.map_err(|e| self.gif_err(e))?;
-        self.frames += 1;
+        self.frames.push(EncodedFrame::new(frame));
         Ok(())
     }
 
-    /// Frames written so far.
+    /// Frames taken so far.
     pub fn frames(&self) -> u32 {
-        self.frames
+        self.frames.len() as u32
     }
 
-    /// Writes the trailer and moves the GIF to its final name. Errors when no frame was
+    /// The whole GIF file, as [`GifWriter::finish`] writes it. Errors when no frame was
     /// pushed (an empty GIF is not a picture).
-    pub fn finish(mut self) -> Result<()> {
-        let Some(enc) = self.encoder.take() else {
+    pub fn encode(&self) -> Result<Vec<u8>> {
+        let Some((w, h)) = self.size.filter(|_| !self.frames.is_empty()) else {
             return Err(Error::Invalid(format!(
                 "{}: gif has no frames (is `every` larger than the run?)",
                 self.path.display()
             )));
         };
-        let file = enc.into_inner().map_err(|e| self.gif_err(e))?;
-        file.commit()
+        let mut enc = gif::Encoder::new(Vec::new(), w, h, &[]).map_err(|e| self.gif_err(e))?;
+        enc.set_repeat(gif::Repeat::Infinite)
+            .map_err(|e| self.gif_err(e))?;
+        for f in &self.frames {
+            enc.write_lzw_pre_encoded_frame(&f.frame())
+                .map_err(|e| self.gif_err(e))?;
+        }
+        enc.into_inner().map_err(|e| self.gif_err(e))
+    }
+
+    /// Writes the GIF to its path, atomically (the first and only write). Errors when no
+    /// frame was pushed (an empty GIF is not a picture).
+    pub fn finish(self) -> Result<()> {
+        atomic_write_bytes(&self.path, &self.encode()?)
     }
 }
 
@@ -342,5 +440,131 @@ mod tests {
         // No frames: finish is an error, not an empty file.
         let e = GifWriter::create(&p, 48, 0.1).unwrap().finish();
         assert!(e.is_err() && !p.exists());
+    }
+
+    /// Many colours (NeuQuant's palette, not the exact one).
+    fn gradient(k: u32, w: u32, h: u32) -> RgbImage {
+        RgbImage::from_fn(w, h, |x, y| {
+            Rgb([
+                (x * 3 + k * 7) as u8,
+                (y * 5 + k) as u8,
+                ((x ^ y) * 11) as u8,
+            ])
+        })
+    }
+
+    /// The GIF as the writer streamed it before it kept frames in memory: one encoder over
+    /// the whole file, `write_frame` per pushed frame.
+    fn streamed(frames: &[RgbImage], width: u32, seconds_per_frame: f32) -> Vec<u8> {
+        let small: Vec<RgbImage> = frames.iter().map(|f| downscale(f, width)).collect();
+        let (w, h) = (small[0].width() as u16, small[0].height() as u16);
+        let mut enc = gif::Encoder::new(Vec::new(), w, h, &[]).unwrap();
+        enc.set_repeat(gif::Repeat::Infinite).unwrap();
+        for s in &small {
+            let mut f = gif::Frame::from_rgb_speed(w, h, s.as_raw(), GIF_SPEED);
+            f.delay = (seconds_per_frame * 100.0).round().clamp(2.0, 65535.0) as u16;
+            enc.write_frame(&f).unwrap();
+        }
+        enc.into_inner().unwrap()
+    }
+
+    #[test]
+    fn gif_bytes_match_a_streaming_encoder() {
+        let dir = tempfile::tempdir().unwrap();
+        let few: Vec<RgbImage> = (0..5).map(|k| frame(k, 128, 96)).collect();
+        let many: Vec<RgbImage> = (0..4).map(|k| gradient(k, 200, 120)).collect();
+        for (name, frames, width, spf) in [
+            ("few.gif", &few, 64, 1.0 / 12.0),
+            ("many.gif", &many, 100, 0.05),
+        ] {
+            let path = dir.path().join(name);
+            let mut g = GifWriter::create(&path, width, spf).unwrap();
+            for f in frames {
+                g.push(f).unwrap();
+            }
+            g.finish().unwrap();
+            let got = std::fs::read(&path).unwrap();
+            assert_eq!(got, streamed(frames, width, spf), "{name}");
+        }
+    }
+
+    #[test]
+    fn gif_writes_no_file_before_finish() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let path = out.join("preview.gif");
+        let mut g = GifWriter::create(&path, 48, 0.1).unwrap();
+        for k in 0..3 {
+            g.push(&frame(k, 96, 64)).unwrap();
+            assert_eq!(g.frames(), k + 1);
+        }
+        // Nothing at all: no final file, no temporary sibling, not even the folder.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        let kept = g.clone();
+        drop(g); // as a killed run
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        kept.finish().unwrap();
+        let names: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["preview.gif"]);
+    }
+
+    #[test]
+    fn gif_and_contact_sheet_resume_from_postcard() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<RgbImage> = (0..6)
+            .map(|k| {
+                if k % 2 == 0 {
+                    gradient(k, 160, 96)
+                } else {
+                    frame(k, 160, 96)
+                }
+            })
+            .collect();
+        let (a, b) = (dir.path().join("a.gif"), dir.path().join("b.gif"));
+        let mut whole = GifWriter::create(&a, 80, 0.1).unwrap();
+        let mut sheet_whole = ContactSheet::new(3, 40).unwrap();
+        for (k, f) in frames.iter().enumerate() {
+            whole.push(f).unwrap();
+            sheet_whole.push(k as u32, f);
+        }
+        whole.finish().unwrap();
+
+        let mut part = GifWriter::create(&b, 80, 0.1).unwrap();
+        let mut sheet_part = ContactSheet::new(3, 40).unwrap();
+        for (k, f) in frames.iter().enumerate().take(4) {
+            part.push(f).unwrap();
+            sheet_part.push(k as u32, f);
+        }
+        let bytes = postcard::to_allocvec(&(&part, &sheet_part)).unwrap();
+        drop((part, sheet_part));
+        let (mut part, mut sheet_part): (GifWriter, ContactSheet) =
+            postcard::from_bytes(&bytes).unwrap();
+        assert_eq!(part.frames(), 4);
+        for (k, f) in frames.iter().enumerate().skip(4) {
+            part.push(f).unwrap();
+            sheet_part.push(k as u32, f);
+        }
+        part.finish().unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        assert_eq!(sheet_part.len(), 6);
+        assert_eq!(
+            sheet_part.compose().unwrap(),
+            sheet_whole.compose().unwrap()
+        );
+
+        // A loaded writer keeps refusing frames of another size.
+        let (mut g, _): (GifWriter, ContactSheet) = postcard::from_bytes(&bytes).unwrap();
+        assert!(g.push(&frame(0, 160, 160)).is_err());
+        // A tile whose bytes do not match its size is refused on load.
+        let bad = Tile {
+            frame: 0,
+            image: RgbImage::new(2, 2),
+        };
+        let mut raw = postcard::to_allocvec(&bad).unwrap();
+        raw[1] = 3; // width 2 -> 3 (the byte after the frame number's)
+        assert!(postcard::from_bytes::<Tile>(&raw).is_err());
     }
 }

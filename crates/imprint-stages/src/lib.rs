@@ -3,6 +3,7 @@
 //! Stages know nothing of RON files or scheduling: the graph crate calls them.
 
 mod bare_option;
+pub mod checkpoint;
 pub mod cloth;
 pub mod depth;
 pub mod drape;

@@ -37,16 +37,27 @@ const FORMAT: u32 = 1;
 #[serde(rename_all = "lowercase")]
 pub enum TrackKind {
     Field,
-    Cloth,
+    /// Vertex positions (a cloth, a skin, a drape, snow on a mesh).
+    Vertices,
     Heights,
 }
 
 impl TrackKind {
+    /// What a node's error is measured on, as its kind declares it.
+    pub fn of(node: &imprint_graph::schema::NodeSpec) -> Option<TrackKind> {
+        use imprint_graph::node::Track;
+        Some(match node.node().track()? {
+            Track::Field => TrackKind::Field,
+            Track::Vertices => TrackKind::Vertices,
+            Track::Heights => TrackKind::Heights,
+        })
+    }
+
     /// Numbers per probe in the cache: xyz + distance, xyz, xz + height.
     fn stride(self) -> usize {
         match self {
             TrackKind::Field => 4,
-            TrackKind::Cloth | TrackKind::Heights => 3,
+            TrackKind::Vertices | TrackKind::Heights => 3,
         }
     }
 
@@ -54,7 +65,7 @@ impl TrackKind {
     pub fn quantity(self) -> &'static str {
         match self {
             TrackKind::Field => "err",
-            TrackKind::Cloth => "dist",
+            TrackKind::Vertices => "dist",
             TrackKind::Heights => "height",
         }
     }
@@ -63,7 +74,7 @@ impl TrackKind {
     pub fn unit_suffix(self) -> &'static str {
         match self {
             TrackKind::Field => "_cells",
-            TrackKind::Cloth | TrackKind::Heights => "",
+            TrackKind::Vertices | TrackKind::Heights => "",
         }
     }
 
@@ -71,7 +82,7 @@ impl TrackKind {
     pub fn describe(self) -> &'static str {
         match self {
             TrackKind::Field => "distance error, in reference cells",
-            TrackKind::Cloth => "particle distance from the reference, world units",
+            TrackKind::Vertices => "particle distance from the reference, world units",
             TrackKind::Heights => "height difference, world units",
         }
     }
@@ -272,20 +283,6 @@ impl Cache {
     }
 }
 
-/// The track kind of what `node` produced, or `None` for a resource without a metric.
-fn kind_of(plan: &Plan, node: &str, value: &Observed<'_>) -> Option<TrackKind> {
-    match value {
-        Observed::Field(_) => Some(TrackKind::Field),
-        Observed::Heights(_) => Some(TrackKind::Heights),
-        Observed::Mesh(_) => plan
-            .file
-            .nodes
-            .get(node)
-            .filter(|n| n.kind() == "Cloth")
-            .map(|_| TrackKind::Cloth),
-    }
-}
-
 /// Every k-th of `n` items, so that at most [`MAX_PROBES`] are kept.
 fn probe_stride(n: usize) -> usize {
     n.div_ceil(MAX_PROBES).max(1)
@@ -357,7 +354,7 @@ impl<'a> Recorder<'a> {
 
 impl Observer for Recorder<'_> {
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>) {
-        let Some(kind) = kind_of(self.plan, node, &value) else {
+        let Some(kind) = self.plan.file.nodes.get(node).and_then(TrackKind::of) else {
             return;
         };
         let (values, unit) = match value {
@@ -490,13 +487,13 @@ impl Comparer<'_> {
                     err.push(f64::from((got.distance - p[3]).abs()) / unit);
                 }
             }
-            (TrackKind::Cloth, Observed::Mesh(m)) if m.positions.len() * 3 == want.len() => {
+            (TrackKind::Vertices, Observed::Mesh(m)) if m.positions.len() * 3 == want.len() => {
                 for (p, q) in m.positions.iter().zip(want.chunks_exact(3)) {
                     let d = *p - glam::Vec3::new(q[0], q[1], q[2]);
                     err.push(f64::from(d.length()) / unit);
                 }
             }
-            (TrackKind::Cloth, Observed::Mesh(m)) => {
+            (TrackKind::Vertices, Observed::Mesh(m)) => {
                 self.notes.insert(format!(
                     "cloth '{node}' has {} particles, the reference {}: not compared",
                     m.positions.len(),

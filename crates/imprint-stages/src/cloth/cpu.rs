@@ -23,6 +23,7 @@ use crate::drape::DepthCollider;
 use glam::{Mat4, Vec3, Vec4};
 use imprint_core::{DistanceField, Error, Mesh, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Particles per parallel task (and per partial sum). Fixed, so sums do not depend on the
@@ -33,7 +34,7 @@ const CHUNK: usize = 256;
 const TINY: f32 = 1e-20;
 
 /// Positions of the current and previous substep; `w` is the inverse mass (0 = pinned).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ClothState {
     pub pos: Vec<Vec4>,
     pub prev: Vec<Vec4>,
@@ -75,7 +76,7 @@ impl ClothAssets {
 }
 
 /// Per-chunk results of one substep, reduced in chunk order.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 struct SubstepStats {
     kinetic: f64,
     contacts: u32,
@@ -144,8 +145,13 @@ struct Substep<'a> {
     max_stretch: f32,
 }
 
-/// A cloth and its state between frames.
+/// A cloth and its state between frames. Serde writes all of it (a checkpoint: loaded, it
+/// steps on to the same bytes as a sim that never stopped).
+#[derive(Serialize, Deserialize)]
 pub struct ClothSim {
+    /// In RON text inside binary checkpoints (its optional fields need a self-describing
+    /// format, see [`crate::checkpoint`]).
+    #[serde(with = "crate::checkpoint::ron_text")]
     params: ClothParams,
     node: String,
     shape: ClothShape,
@@ -801,6 +807,51 @@ impl ClothSim {
             ..SubstepStats::new()
         };
         Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &[], &stats, &stats))
+    }
+
+    /// [`ClothSim::adopt_gpu_frame`] for a GPU cloth whose colliders stay on the GPU: no
+    /// field is needed on the CPU. The residual contacts (`close`, `close_max_depth`) are
+    /// the ones the GPU measured against its end-of-frame colliders and the ground after the
+    /// frame's last substep (`gpu.close`, `gpu.close_max_depth`); strain, energies and their
+    /// drift come from `state` as in [`ClothSim::adopt_gpu_frame`]. `side` holds
+    /// `gpu.colliders` entries per particle (at least one), as [`GpuCloth::read_side`] gives
+    /// it.
+    ///
+    /// [`GpuCloth::read_side`]: super::gpu::GpuCloth::read_side
+    pub fn adopt_gpu_frame_resident(
+        &mut self,
+        state: ClothState,
+        side: Vec<Vec4>,
+        gpu: &super::gpu::GpuClothFrameMetrics,
+    ) -> Result<ClothFrameMetrics> {
+        let n = self.len();
+        let nf = gpu.colliders as usize;
+        if state.pos.len() != n || state.prev.len() != n || side.len() != n * nf.max(1) {
+            return Err(Error::Invalid(format!(
+                "cloth: a GPU state of {} particles and {} side entries for {n} particles and \
+                 {nf} colliders",
+                state.pos.len(),
+                side.len()
+            )));
+        }
+        self.state = state;
+        self.side = side;
+        self.side_fields = nf;
+        self.dt_prev = Some(gpu.dt_substep);
+        let stats = SubstepStats {
+            contacts: gpu.contacts,
+            inside: gpu.inside,
+            max_depth: gpu.max_depth,
+            max_accel: gpu.max_accel,
+            band_misses: gpu.band_misses,
+            ..SubstepStats::new()
+        };
+        // No colliders here: the frame pass measures strain and energies (and a ground
+        // residual, which the GPU's replaces).
+        let mut m = self.metrics(gpu.frame, gpu.dt_substep, &[], &[], &stats, &stats);
+        m.close = gpu.close;
+        m.close_max_depth = gpu.close_max_depth;
+        Ok(m)
     }
 
     /// The cloth as a mesh (the garment's own vertex layout and UVs, or the grid's), with

@@ -42,7 +42,8 @@ use super::springs::{Faces, Hinge, LinkQuad, SpringLaw};
 use super::stability::StabilityEstimate;
 use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
-use imprint_core::{DistanceField, Error, GridSpec, Mesh, Result};
+use crate::sdf::gpu::GpuField;
+use imprint_core::{BoundaryVariant, DistanceField, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -64,12 +65,98 @@ impl GpuCollider {
     pub fn from_field(ctx: &GpuContext, field: &DistanceField) -> Result<Self> {
         let spec = field.spec;
         ctx.check_grid("cloth collider field", spec.dims.to_array(), 16)?;
-        static NEXT: AtomicU64 = AtomicU64::new(1);
         Ok(GpuCollider {
-            id: NEXT.fetch_add(1, Ordering::Relaxed),
+            id: next_collider_id(),
             spec,
             band: field.band,
             cells: ctx.storage_buffer("cloth collider field", field.cells())?,
+        })
+    }
+
+    /// The collider of a field built on the GPU ([`crate::sdf::gpu::build_field_gpu`]), made
+    /// on the device (`shaders/cloth/collider.wgsl`): the cells, bit for bit, that
+    /// `GpuCollider::from_field(ctx, &field.to_cpu(ctx)?)` would upload
+    /// ([`DistanceField::cells`] of the field read back), with nothing read back. A Closest
+    /// boundary's owning triangles go up in world units (48 bytes a triangle), as the CPU
+    /// field has them; nothing else but a uniform is uploaded. Submitted, not waited for.
+    ///
+    /// The closest points use WGSL's division, which the WGSL spec lets a device round less
+    /// exactly than the CPU; on Mesa lavapipe the cells are the CPU's to the bit
+    /// (`tests/tests/gpu_resident.rs`).
+    pub fn from_gpu_field(ctx: &GpuContext, field: &GpuField) -> Result<Self> {
+        let spec = field.spec;
+        ctx.check_grid("cloth collider field", spec.dims.to_array(), 16)?;
+        let b = &field.boundary;
+        if b.spec != spec {
+            return Err(Error::Invalid(format!(
+                "GPU field on {:?} but its boundary on {:?}",
+                spec, b.spec
+            )));
+        }
+        let closest = b.variant == BoundaryVariant::Closest;
+        if closest && b.faces_world.is_empty() {
+            return Err(Error::Invalid(
+                "a Closest boundary needs the owning face of each point".into(),
+            ));
+        }
+        let faces: Vec<[f32; 4]> = if closest {
+            b.faces_world
+                .iter()
+                .flat_map(|f| f.map(|v| v.extend(0.0).to_array()))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let faces = ctx.storage_buffer("cloth collider faces", &faces)?;
+        let cells = ctx.zeroed_buffer("cloth collider field", spec.len() as u64 * 16)?;
+        let pipeline = ctx.pipeline(
+            "cloth collider",
+            &[
+                shader!("common/dispatch.wgsl"),
+                shader!("common/geom.wgsl"),
+                shader!("cloth/collider.wgsl"),
+            ],
+            "collider_cells",
+        )?;
+        let n_cells = spec.len() as u32;
+        let params = ctx.uniform_buffer(
+            "cloth collider params",
+            &ColliderParams {
+                dims: [spec.dims.x, spec.dims.y, spec.dims.z, n_cells],
+                origin: spec.origin.extend(spec.cell).to_array(),
+                closest: closest as u32,
+                zero: 0,
+                _pad: [0; 2],
+            },
+        );
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("cloth collider"),
+            });
+        record_pass(
+            ctx,
+            &mut encoder,
+            "cloth collider cells",
+            &pipeline,
+            &[
+                (0, &params),
+                (1, &field.field),
+                (2, &field.nearest_cell),
+                (3, &b.points),
+                (4, &b.owner),
+                (5, &faces),
+                (6, &cells),
+            ],
+            Dispatch::Threads(n_cells),
+            None,
+        );
+        submit(ctx, encoder, None);
+        Ok(GpuCollider {
+            id: next_collider_id(),
+            spec,
+            band: field.band,
+            cells,
         })
     }
 
@@ -79,10 +166,29 @@ impl GpuCollider {
     }
 }
 
+/// A fresh collider id (slots whose collider did not change are not copied again).
+fn next_collider_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
+/// Mirrors `ColliderParams` in `shaders/cloth/collider.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ColliderParams {
+    dims: [u32; 4],
+    origin: [f32; 4],
+    closest: u32,
+    zero: u32,
+    _pad: [u32; 2],
+}
+
 /// What a GPU frame reports: the subset of [`super::ClothFrameMetrics`] that per-particle
-/// flags give without a reduction on the GPU. [`ClothSim::adopt_gpu_frame`] completes it
-/// (strain, residual contacts, energies) from the state read back once per frame, as the
-/// `Cloth` node does.
+/// flags give without a reduction on the GPU, and the residual contacts, measured on the GPU
+/// after the frame's last substep. [`ClothSim::adopt_gpu_frame_resident`] completes it
+/// (strain, energies) from the state read back once per frame without any field on the CPU;
+/// [`ClothSim::adopt_gpu_frame`] does the same but measures the residual contacts again on
+/// the CPU against CPU copies of the end-of-frame fields.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct GpuClothFrameMetrics {
     pub frame: u32,
@@ -98,6 +204,16 @@ pub struct GpuClothFrameMetrics {
     pub band_misses: u32,
     /// Kinetic energy of the last substep (free particles), J.
     pub kinetic: f64,
+    /// Colliders of the frame (the side memory holds this many entries per particle, at
+    /// least one).
+    pub colliders: u32,
+    /// After the frame, against the end-of-frame colliders (their end fields, as the CPU's
+    /// frame pass takes them) and the ground: free particles closer than ε...
+    pub close: u32,
+    /// ...and how much closer, at most (0 when none is). The CPU's formulas, in the shader's
+    /// f32 arithmetic (which may fuse), so a particle left within rounding of ε may count
+    /// here and not on the CPU, or the other way.
+    pub close_max_depth: f32,
 }
 
 /// Mirrors `StepParams` in the shader.
@@ -154,6 +270,7 @@ struct Stats {
     overstretched: u32,
     step2: f32,
     accel2: f32,
+    close_depth: f32,
 }
 
 /// The colliders bound for the current frame.
@@ -274,7 +391,10 @@ impl GpuCloth {
             side: ctx.zeroed_buffer("cloth side", bytes)?,
             side_backup: ctx.zeroed_buffer("cloth side backup", bytes)?,
             side_fields: 0,
-            stats: ctx.zeroed_buffer("cloth stats", n as u64 * 32)?,
+            stats: ctx.zeroed_buffer(
+                "cloth stats",
+                n as u64 * std::mem::size_of::<Stats>() as u64,
+            )?,
             fields: None,
             step_params: Vec::new(),
             dt_prev: None,
@@ -583,6 +703,29 @@ impl GpuCloth {
             cur = (cur + 1) % 3;
             dt_prev = Some(dt);
         }
+        // The residual contacts at the frame's end, against the end fields: the last
+        // substep's parameters have s = 1, which reads the end slots only.
+        let residual = ctx.pipeline(
+            "cloth step",
+            &[shader!("common/dispatch.wgsl"), shader!("cloth/step.wgsl")],
+            "residual",
+        )?;
+        record_pass(
+            ctx,
+            &mut encoder,
+            "cloth residual",
+            &residual,
+            &[
+                (0, &self.step_params[n_sub as usize - 1]),
+                (6, &self.bufs[cur]),
+                (8, &self.side),
+                (9, &self.stats),
+                (10, &fields.headers),
+                (11, &fields.cells),
+            ],
+            Dispatch::Threads(self.n),
+            timer.as_deref_mut(),
+        );
         submit(ctx, encoder, timer.as_deref_mut());
         if let Some(t) = timer {
             t.wait(ctx)?;
@@ -606,8 +749,13 @@ impl GpuCloth {
         let mut step2 = 0.0f64;
         let (mut contacts, mut inside, mut band_misses) = (0u32, 0u32, 0u32);
         let (mut max_depth, mut accel2) = (0.0f32, 0.0f32);
+        let (mut close, mut close_max_depth) = (0u32, 0.0f32);
         for s in stats {
             // Pinned particles leave step2 and the counts at 0.
+            if s.close_depth > 0.0 {
+                close += 1;
+                close_max_depth = close_max_depth.max(s.close_depth);
+            }
             contacts += s.contacts;
             inside += s.inside;
             band_misses += s.band_misses;
@@ -669,6 +817,9 @@ impl GpuCloth {
             max_accel: accel2.sqrt() / (dt * dt),
             band_misses,
             kinetic: ke,
+            colliders: nf as u32,
+            close,
+            close_max_depth,
         })
     }
 

@@ -4,10 +4,11 @@
 use super::params::{Pin, Shape};
 use glam::{Vec2, Vec3};
 use imprint_core::{Error, Mesh, Result};
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// Particles and faces at rest, and how to write them back out as a mesh.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ClothShape {
     /// Rest position of each particle.
     pub rest: Vec<Vec3>,

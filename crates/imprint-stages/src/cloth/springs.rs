@@ -12,6 +12,7 @@ use super::shape::ClothShape;
 use super::texture::AnisotropyMap;
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// What a spring is for (H §4.1): its constant comes from this.
@@ -225,7 +226,7 @@ fn mesh_springs(shape: &ClothShape) -> Vec<Spring> {
 
 /// How force grows with extension e = r - l: `k e` (H eq. 9) or `k e |e|` (T eq. 1), with k
 /// the stretch constant for e >= 0 and the compression constant for e < 0.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum SpringLaw {
     #[default]
     Linear,
@@ -254,7 +255,7 @@ impl SpringLaw {
 /// Four springs of one particle: the other ends, rest lengths and constants. Inert padding
 /// links point at the particle itself with rest length and constants 0.
 #[repr(C, align(16))]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 pub struct LinkQuad {
     pub other: [u32; 4],
     pub rest: [f32; 4],
@@ -263,7 +264,7 @@ pub struct LinkQuad {
 }
 
 /// Per-particle spring lists (CSR over [`LinkQuad`]s).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Links {
     pub law: SpringLaw,
     /// Particle i's quads are `quads[offsets[i]..offsets[i + 1]]`.
@@ -386,7 +387,7 @@ impl Links {
 /// (v1, v0, v3); potential c (|φ| - sin|φ|) in φ = θ - θ_rest, whose force on a wing is
 /// c (1 - cos φ) / (its distance to the hinge), Tokoi's c (cos θ - 1) / d.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 pub struct Hinge {
     pub v: [u32; 4],
     pub rest_angle: f32,
@@ -396,7 +397,7 @@ pub struct Hinge {
 
 /// Per-particle hinge lists: entries are `hinge * 4 + role` (role = the particle's slot in
 /// `Hinge::v`).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Hinges {
     pub hinges: Vec<Hinge>,
     pub offsets: Vec<u32>,
@@ -502,7 +503,7 @@ pub fn hinge_slope(c: f32, phi: f32) -> f32 {
 
 /// Per-particle face lists for normals and wind: entries are the face's other two particles
 /// in winding order, so (x_a - x_i) x (x_b - x_i) is twice the face's area vector.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Faces {
     pub offsets: Vec<u32>,
     pub others: Vec<[u32; 2]>,

@@ -20,7 +20,7 @@ use super::springs::{Hinges, Links, hinge_angle_gradient};
 use glam::Vec3;
 use imprint_core::{Error, Result};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The strain at which Tokoi's quadratic springs are linearised for the estimate.
 pub const REFERENCE_STRAIN: f32 = 0.1;
@@ -31,7 +31,7 @@ pub const SAFETY: f32 = 0.9;
 const POWER_ITERATIONS: usize = 100;
 
 /// The largest stable substep, predicted from the rest state.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StabilityEstimate {
     /// Power-iteration estimate of the critical substep, s (a few percent above the truth
     /// at worst: use [`StabilityEstimate::substeps_for`], which keeps a margin).

@@ -74,11 +74,13 @@
 //! **Determinism.** Every vertex is decided on its own from the maps and the mesh; counts and
 //! the maximum are gathered in vertex order: the result is the same on any thread count.
 
+pub mod body;
 pub mod collider;
 pub mod cpu;
 pub mod inside;
 pub mod params;
 
+pub use body::{DepthBody, DepthBodyState};
 pub use collider::{DepthCamera, DepthCollider, DepthColliderParams, DepthPose};
 pub use cpu::{DrapeReport, Push, body_field, drape_cpu, drape_with};
 pub use inside::InsideTest;

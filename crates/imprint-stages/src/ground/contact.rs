@@ -13,10 +13,11 @@ use glam::{UVec2, Vec2};
 use imprint_core::geom::Aabb;
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{Camera, Mesh, Result};
+use serde::{Deserialize, Serialize};
 
 /// The ground's cells in the world (the conventions of `imprint_core::HeightField`: square
 /// cells, `origin` the centre of cell (0, 0), x fastest) and its fixed-point height unit.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GroundGrid {
     /// World (x, z) of the centre of cell (0, 0).
     pub origin: Vec2,
@@ -30,7 +31,7 @@ pub struct GroundGrid {
 
 /// A rectangle of cells: columns `i0..i0 + w`, rows `k0..k0 + h`. The per-frame work of the
 /// stage runs over windows, so its cost follows the contact, not the field.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Window {
     pub i0: u32,
     pub k0: u32,

@@ -12,13 +12,14 @@
 //! `d = min(d, neighbours + 1)` iterated in ping-pong, which reaches the same integers.
 
 use super::contact::Window;
+use serde::{Deserialize, Serialize};
 
 /// Level of a cell the map does not label.
 pub const UNLABELLED: u32 = u32::MAX;
 
 /// The contour maps of one frame's contact, over the frame's work window (the contact's
 /// bounding box grown by the slump band and one more cell, clipped to the field).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ContourMaps {
     pub window: Window,
     /// Whether an object's bottom was below the ground in the cell.

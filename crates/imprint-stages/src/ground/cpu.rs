@@ -14,13 +14,15 @@ use glam::UVec2;
 use imprint_core::error::check_alloc;
 use imprint_core::{Error, HeightField, Mesh, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// A threshold no height difference reaches: θ = 90°, no slump.
 const NO_SLUMP: i64 = i64::MAX / 4;
 
-/// The ground: its heights and everything a frame needs to move them.
-#[derive(Clone, Debug)]
+/// The ground: its heights and everything a frame needs to move them. Serde writes all of it
+/// (a checkpoint: loaded, it steps on to the same bytes as a sim that never stopped).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GroundSim {
     grid: GroundGrid,
     material: MaterialValues,

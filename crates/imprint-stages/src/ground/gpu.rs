@@ -31,13 +31,15 @@
 //! [`GroundSim::add_heights`] (move the ground to the CPU and back with
 //! [`GpuGround::to_sim`] / [`GpuGround::from_sim`]).
 
-use super::contact::{self, GroundGrid};
+use super::contact::{self, GroundGrid, NO_OBJECT, Window};
 use super::cpu::{GroundSim, work_window};
 use super::metrics::GroundFrameMetrics;
 use super::params::{GroundParams, MaterialValues, Relaxation, invalid};
 use imprint_core::camera::Camera;
 use imprint_core::raster::{DepthMap, RasterOptions};
 use imprint_core::{Mesh, Result};
+use crate::depth::HeightView;
+use imprint_gpu::raster::GpuRasterizer;
 use imprint_gpu::{Dispatch, GpuContext, record_pass, shader, submit};
 use std::path::Path;
 
@@ -214,6 +216,193 @@ impl GpuGround {
         Ok(m)
     }
 
+    /// One frame (as [`GpuGround::step_with`] with `raster`'s depth maps), its contact found
+    /// on the GPU: each object's depth map is read where it was rendered
+    /// ([`GpuRasterizer::depth_map_resident`]) and turned there into bottoms, the contact's
+    /// box and the carries (`shaders/ground/contact.wgsl`, integers only), so no depth map is
+    /// read back and no bottom or carry is uploaded. Read back: the contact's box (32 bytes,
+    /// which sizes the work window, when an object reaches below the ground under it), the
+    /// frame's stats words, and the heights (the stage's output, as in
+    /// [`GpuGround::step_with`]). The same heights and metrics as
+    /// [`GpuGround::step_with`] with `raster`'s `depth_map`, bit for bit.
+    pub fn step_resident(
+        &mut self,
+        ctx: &GpuContext,
+        raster: &mut GpuRasterizer,
+        objects: &[&Mesh],
+    ) -> Result<GroundFrameMetrics> {
+        let mut m = GroundFrameMetrics {
+            frame: self.frame,
+            ..Default::default()
+        };
+        self.contact_resident(ctx, raster, objects, &mut m)?;
+        m.mass_units = self.mass();
+        m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
+        self.frame += 1;
+        Ok(m)
+    }
+
+    /// Step 1 of the module doc on the GPU (see [`GpuGround::step_resident`]), then steps 2-6.
+    fn contact_resident(
+        &mut self,
+        ctx: &GpuContext,
+        raster: &mut GpuRasterizer,
+        objects: &[&Mesh],
+        m: &mut GroundFrameMetrics,
+    ) -> Result<()> {
+        let grid = self.grid;
+        let nx = grid.dims.x;
+        // The objects to rasterise and where, as contact::object_bottoms_with chooses them.
+        let mut parts = Vec::new();
+        for &mesh in objects {
+            let b = mesh.bounds();
+            if b.is_empty() {
+                continue;
+            }
+            let Some(w) = grid.window_under(&b) else {
+                continue;
+            };
+            let top = (0..w.h)
+                .flat_map(|y| (0..w.w).map(move |x| (x, y)))
+                .map(|(x, y)| self.mirror[w.global(x, y, nx)])
+                .max()
+                .unwrap_or(0);
+            if grid.to_units(b.min.y as f64) >= top as i64 {
+                continue;
+            }
+            let cam = grid
+                .region(&w)?
+                .camera(HeightView::Below, (b.min.y, b.max.y))?;
+            parts.push((mesh, w, cam));
+        }
+        let Some(bw) = parts.iter().map(|p| p.1).reduce(|a, b| a.union(&b)) else {
+            return Ok(());
+        };
+        let (unit_lo, unit_hi, unit_exp) = unit_parts(grid.unit)?;
+        let base = ContactParams {
+            nx,
+            bi0: bw.i0,
+            bk0: bw.k0,
+            bw: bw.w,
+            bh: bw.h,
+            alpha: self.material.displace_ratio,
+            unit_lo,
+            unit_hi,
+            unit_exp,
+            ..bytemuck::Zeroable::zeroed()
+        };
+        let pipe = |entry: &str| {
+            ctx.pipeline(
+                "ground contact",
+                &[
+                    shader!("common/dispatch.wgsl"),
+                    shader!("ground/contact.wgsl"),
+                ],
+                entry,
+            )
+        };
+        let encoder = |label| {
+            ctx.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+        };
+        let bottoms = ctx.zeroed_buffer("ground object bottoms", 4 * bw.len() as u64)?;
+        let box_ = ctx.zeroed_buffer("ground contact box", 32)?;
+        let mut enc = encoder("ground bottoms");
+        ctx.fill_u32(&mut enc, &bottoms, NO_OBJECT as u32)?;
+        submit(ctx, enc, None);
+        let bottoms_pass = pipe("bottoms_pass")?;
+        for (mesh, w, cam) in &parts {
+            let map =
+                raster.depth_map_resident(ctx, mesh, cam, w.w, w.h, &RasterOptions::default())?;
+            let ub = ctx.uniform_buffer(
+                "ground contact params",
+                &ContactParams {
+                    i0: w.i0,
+                    k0: w.k0,
+                    w: w.w,
+                    h: w.h,
+                    row_texels: map.row_texels,
+                    eye_y: map.camera.eye.y,
+                    ..base
+                },
+            );
+            let mut enc = encoder("ground bottoms");
+            record_pass(
+                ctx,
+                &mut enc,
+                "ground bottoms",
+                &bottoms_pass,
+                &[(0, &ub), (2, map.texels()), (3, &bottoms), (4, &box_)],
+                Dispatch::Threads(w.w * w.h),
+                None,
+            );
+            submit(ctx, enc, None);
+        }
+        let ub = ctx.uniform_buffer("ground contact params", &base);
+        let mut enc = encoder("ground contact box");
+        record_pass(
+            ctx,
+            &mut enc,
+            "ground contact box",
+            &pipe("contact_box")?,
+            &[(0, &ub), (1, &self.heights), (3, &bottoms), (4, &box_)],
+            Dispatch::Threads(bw.w * bw.h),
+            None,
+        );
+        submit(ctx, enc, None);
+        let bx: Vec<u32> = ctx.read_buffer(&box_)?;
+        if bx[7] != 0 {
+            return Err(invalid(
+                "a depth view of an object gave a height that is not finite".into(),
+            ));
+        }
+        if bx[4] == 0 {
+            return Ok(());
+        }
+        m.contact_cells = bx[4];
+        m.removed_units = (bx[5] as u64 | (bx[6] as u64) << 32) as i64;
+        let (lo, hi) = ((u32::MAX - bx[0], u32::MAX - bx[1]), (bx[2], bx[3]));
+        // As work_window: the contact's box grown by band + 1 cells, clipped to the field.
+        let win = Window {
+            i0: lo.0,
+            k0: lo.1,
+            w: hi.0 - lo.0 + 1,
+            h: hi.1 - lo.1 + 1,
+        }
+        .grow(self.band + 1, grid.dims);
+        let n = win.len() as u64;
+        let bottom = ctx.zeroed_buffer("ground bottoms", 4 * n)?;
+        let carry = ctx.zeroed_buffer("ground carry", 8 * n)?;
+        let ub = ctx.uniform_buffer(
+            "ground contact params",
+            &ContactParams {
+                wi0: win.i0,
+                wk0: win.k0,
+                ww: win.w,
+                wh: win.h,
+                ..base
+            },
+        );
+        let mut enc = encoder("ground gather");
+        record_pass(
+            ctx,
+            &mut enc,
+            "ground gather",
+            &pipe("gather")?,
+            &[
+                (0, &ub),
+                (1, &self.heights),
+                (3, &bottoms),
+                (5, &bottom),
+                (6, &carry),
+            ],
+            Dispatch::Threads(win.w * win.h),
+            None,
+        );
+        submit(ctx, enc, None);
+        self.press_window(ctx, win, bottom, carry, m)
+    }
+
     /// Steps 1-6 of the module doc for one contact.
     fn press(
         &mut self,
@@ -237,17 +426,35 @@ impl GpuGround {
                 carry[j] = (alpha * removed as f64).round() as u64;
             }
         }
+        let bottom = ctx.storage_buffer("ground bottoms", &bottom)?;
+        let carry = ctx.storage_buffer("ground carry", &carry)?;
+        self.press_window(ctx, win, bottom, carry, m)
+    }
+
+    /// Steps 2-6 of the module doc over the work window `win`, from its bottoms and carries
+    /// (GPU buffers: uploaded by [`GpuGround::press`], made on the GPU by
+    /// [`GpuGround::step_resident`]).
+    fn press_window(
+        &mut self,
+        ctx: &GpuContext,
+        win: Window,
+        bottom: wgpu::Buffer,
+        carry: wgpu::Buffer,
+        m: &mut GroundFrameMetrics,
+    ) -> Result<()> {
+        let nx = self.grid.dims.x;
+        let n = win.len();
         let passes = match self.threshold {
             Some(_) => self.material.slump_iterations,
             None => 0,
         };
         let f = Frame {
-            bottom: ctx.storage_buffer("ground bottoms", &bottom)?,
+            bottom,
             contact: ctx.zeroed_buffer("ground contact", 4 * n as u64)?,
             tmp: ctx.zeroed_buffer("ground distance rows", 4 * n as u64)?,
             inner: ctx.zeroed_buffer("ground inner map", 4 * n as u64)?,
             outer: ctx.zeroed_buffer("ground outer map", 4 * n as u64)?,
-            carry: ctx.storage_buffer("ground carry", &carry)?,
+            carry,
             steep: ctx.zeroed_buffer("ground steep counts", 4 * n as u64)?,
             delta: ctx.zeroed_buffer("ground slump flows", 4 * n as u64)?,
             stats: ctx
@@ -429,4 +636,113 @@ impl GpuGround {
         m.max_slope = stats[STAT_MAX_DIFF] as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
         Ok(())
     }
+}
+
+/// The shader's `ContactParams` (`shaders/ground/contact.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct ContactParams {
+    nx: u32,
+    i0: u32,
+    k0: u32,
+    w: u32,
+    h: u32,
+    row_texels: u32,
+    bi0: u32,
+    bk0: u32,
+    bw: u32,
+    bh: u32,
+    wi0: u32,
+    wk0: u32,
+    ww: u32,
+    wh: u32,
+    eye_y: f32,
+    alpha: f32,
+    unit_lo: u32,
+    unit_hi: u32,
+    unit_exp: i32,
+    count: u32,
+}
+
+/// The height unit as the contact shader takes it: its 53-bit significand (low and high
+/// words) and the power of two it is multiplied by.
+fn unit_parts(unit: f64) -> Result<(u32, u32, i32)> {
+    let bits = unit.to_bits();
+    let e = ((bits >> 52) & 0x7ff) as i32;
+    if !(unit.is_finite() && unit > 0.0) || e == 0 {
+        return Err(invalid(format!(
+            "the height unit {unit} m must be a normal positive number for the GPU contact"
+        )));
+    }
+    let mant = (bits & ((1u64 << 52) - 1)) | (1u64 << 52);
+    Ok((mant as u32, (mant >> 32) as u32, e - 1075))
+}
+
+/// Runs one of the contact shader's probes over `input` (for tests).
+fn probe(
+    ctx: &GpuContext,
+    entry: &str,
+    params: ContactParams,
+    input: &[u32],
+    words_out: u64,
+) -> Result<Vec<u32>> {
+    let pipeline = ctx.pipeline(
+        "ground contact",
+        &[
+            shader!("common/dispatch.wgsl"),
+            shader!("ground/contact.wgsl"),
+        ],
+        entry,
+    )?;
+    let count = u32::try_from(input.len())
+        .map_err(|_| invalid(format!("{} values are too many to probe", input.len())))?;
+    let ub = ctx.uniform_buffer("ground probe params", &ContactParams { count, ..params });
+    let inp = ctx.storage_buffer("ground probe in", input)?;
+    let out = ctx.zeroed_buffer("ground probe out", 4 * words_out * input.len() as u64)?;
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    record_pass(
+        ctx,
+        &mut enc,
+        entry,
+        &pipeline,
+        &[(0, &ub), (7, &inp), (8, &out)],
+        Dispatch::Threads(count),
+        None,
+    );
+    submit(ctx, enc, None);
+    let mut v: Vec<u32> = ctx.read_buffer(&out)?;
+    v.truncate(words_out as usize * input.len());
+    Ok(v)
+}
+
+/// The contact shader's f64-free `GroundGrid::bottom_units` (without its `f32::MAX` case:
+/// `((m as f64) / unit).round() as i64` clamped to `0..=i32::MAX - 1`) for each of `metres`,
+/// run on the GPU. For tests, which hold it to the CPU's f64 arithmetic.
+#[doc(hidden)]
+pub fn units_on_gpu(ctx: &GpuContext, unit: f64, metres: &[f32]) -> Result<Vec<i32>> {
+    let (unit_lo, unit_hi, unit_exp) = unit_parts(unit)?;
+    let params = ContactParams {
+        unit_lo,
+        unit_hi,
+        unit_exp,
+        ..bytemuck::Zeroable::zeroed()
+    };
+    let bits: Vec<u32> = metres.iter().map(|m| m.to_bits()).collect();
+    let out = probe(ctx, "probe_units", params, &bits, 1)?;
+    Ok(out.into_iter().map(|u| u as i32).collect())
+}
+
+/// The contact shader's f64-free carry, `(alpha as f64 * removed as f64).round() as u64`, for
+/// each of `removed`, run on the GPU. For tests.
+#[doc(hidden)]
+pub fn carry_on_gpu(ctx: &GpuContext, alpha: f32, removed: &[u32]) -> Result<Vec<u64>> {
+    let params = ContactParams {
+        alpha,
+        ..bytemuck::Zeroable::zeroed()
+    };
+    let out = probe(ctx, "probe_carry", params, removed, 2)?;
+    Ok(out
+        .chunks_exact(2)
+        .map(|w| w[0] as u64 | (w[1] as u64) << 32)
+        .collect())
 }

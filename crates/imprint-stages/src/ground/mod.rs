@@ -69,4 +69,14 @@ pub use contact::{Bottoms, GroundGrid, NO_OBJECT, Window};
 pub use contour::{ContourMaps, UNLABELLED};
 pub use cpu::GroundSim;
 pub use metrics::GroundFrameMetrics;
+/// The rise of a layer since the last frame, per cell (what a ground takes in when fresh snow
+/// or anything else piles up on it; see [`GroundSim::add_heights`]).
+pub fn rise(now: &imprint_core::HeightField, before: &imprint_core::HeightField) -> Vec<f32> {
+    now.heights
+        .iter()
+        .zip(&before.heights)
+        .map(|(n, b)| n - b)
+        .collect()
+}
+
 pub use params::{GroundParams, Initial, Material, MaterialValues, Preset, Relaxation};

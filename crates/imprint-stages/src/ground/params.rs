@@ -111,7 +111,7 @@ pub enum Preset {
 }
 
 /// A material's numbers, whether from a preset or custom.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MaterialValues {
     pub repose_degrees: f32,
     pub slump_iterations: u32,

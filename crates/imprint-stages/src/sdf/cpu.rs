@@ -17,6 +17,7 @@ use glam::Vec3;
 use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i};
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 const SLAB_LAYERS: usize = 4;
@@ -106,6 +107,10 @@ impl FieldBuilder {
 /// (and one layer more, which the next part splats again to the same values) and refines its
 /// layers, whose six neighbours are then all splatted. Cells do not depend on how the grid is
 /// cut, so any number of parts gives the same field.
+///
+/// Serde writes all of it, so a build can be checkpointed between parts and finished after
+/// loading (with any [`FieldBuilder`]: the builder only lends buffers).
+#[derive(Serialize, Deserialize)]
 pub struct FieldBuild {
     spec: imprint_core::GridSpec,
     band: f32,

@@ -48,8 +48,12 @@ impl GpuField {
     }
 
     /// Reads the field back as the CPU's [`DistanceField`], `nearest` converted from surface
-    /// cell indices to indices into the compacted boundary points.
+    /// cell indices to indices into the compacted boundary points: for writers, error
+    /// measurement and CPU consumers (a GPU consumer takes the field where it is, e.g.
+    /// `GpuCollider::from_gpu_field`). Counted as one field read-back
+    /// ([`imprint_gpu::transfer`]), its bytes as read-backs.
     pub fn to_cpu(&self, ctx: &GpuContext) -> Result<DistanceField> {
+        imprint_gpu::transfer::count_field_read_back();
         let boundary = self.boundary.to_cpu(ctx)?;
         let field: Vec<[f32; 4]> = ctx.read_buffer(&self.field)?;
         let cells: Vec<u32> = ctx.read_buffer(&self.nearest_cell)?;

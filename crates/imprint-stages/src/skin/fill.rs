@@ -117,7 +117,7 @@ pub struct FillReport {
 }
 
 /// The particles of a fill, in a fixed order.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Fill {
     pub positions: Vec<Vec3>,
     pub radii: Vec<f32>,

@@ -268,7 +268,9 @@ pub struct ParticleFrameMetrics {
 }
 
 /// The particle skinning state: particles, their neighbours and bones, and the vertices' ties.
-#[derive(Clone, Debug)]
+/// Serde writes all of it (a checkpoint: loaded, it steps on to the same bytes as a skin that
+/// never stopped).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ParticleSkin {
     node: String,
     params: ParticleParams,

@@ -32,6 +32,7 @@ use imprint_core::camera::Frame;
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{Aabb, Camera, HeightField, Mesh, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
 use std::f64::consts::TAU;
 
@@ -138,7 +139,7 @@ pub fn gather(meshes: &[&Mesh], ground: Option<&HeightField>) -> (Mesh, Receiver
 }
 
 /// How many of the directions reach each receiver.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Arrival {
     /// Per receiver (the order of [`Receivers`]).
     pub counts: Vec<u32>,

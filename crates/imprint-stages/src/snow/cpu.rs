@@ -31,9 +31,10 @@ use glam::{UVec2, Vec3};
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{Camera, Error, HeightField, Mesh, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// The snow on a ground height field.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GroundSnow {
     /// The bare ground of the last step (or [`SnowSim::set_ground`]).
     pub base: HeightField,
@@ -124,13 +125,19 @@ pub struct GroundCover {
 
 /// Snow accumulating over a scene, step by step. All state is here; a run is reproducible to
 /// the bit on any number of threads.
-#[derive(Clone, Debug)]
+///
+/// Serde writes all of it but the relaxation's scratch buffers (a checkpoint: loaded, it steps
+/// on to the same bytes as a sim that never stopped).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SnowSim {
     params: SnowParams,
     directions: Vec<Vec3>,
     meshes: Vec<Vec<f32>>,
     ground: Option<GroundSnow>,
     arrival: Option<Arrival>,
+    /// Not serialised (empty after loading): [`relax::relax`] sizes it and every pass writes
+    /// all of it before reading it, so nothing carries over from one call to the next.
+    #[serde(skip)]
     scratch: Scratch,
     time: f64,
 }

@@ -34,6 +34,7 @@ use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
 use imprint_core::raster::{DepthMap, RasterOptions};
 use imprint_core::{Camera, Error, HeightField, Mesh, Result};
+use imprint_gpu::raster::GpuRasterizer;
 use imprint_gpu::{Dispatch, GpuContext, record_pass, shader, submit};
 
 /// Passes recorded per submission (the counters are read back once per batch).
@@ -239,7 +240,126 @@ struct LookupParams {
     bias_texels: f32,
     res: u32,
     receivers: u32,
-    _pad: [u32; 2],
+    row_texels: u32,
+    _pad: u32,
+}
+
+impl LookupParams {
+    fn new(look: &Lookup, dir: Vec3, params: &SnowParams, receivers: u32, row_texels: u32) -> Self {
+        let four = |v: Vec3| v.extend(0.0).to_array();
+        let f = look.frame;
+        LookupParams {
+            eye: four(f.eye),
+            right: four(f.right),
+            up: four(f.up),
+            forward: four(f.forward),
+            dir: four(dir),
+            k: look.k,
+            centre: look.centre,
+            texel: look.texel,
+            bias_texels: params.bias_texels,
+            res: look.res,
+            receivers,
+            row_texels,
+            _pad: 0,
+        }
+    }
+}
+
+/// What one arrival call keeps on the GPU: the receivers, their counts, the look-up's
+/// parameters and pipeline.
+struct LookupRun {
+    n: usize,
+    threads: u32,
+    pipeline: wgpu::ComputePipeline,
+    points: wgpu::Buffer,
+    normals: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    uniform: wgpu::Buffer,
+}
+
+impl LookupRun {
+    /// Uploads the receivers; `None` when there is nothing to look up (no receiver, an empty
+    /// occluder or no direction).
+    fn start(
+        ctx: &GpuContext,
+        occluder: &Mesh,
+        receivers: &Receivers,
+        directions: &[Vec3],
+        entry: &str,
+    ) -> Result<Option<Self>> {
+        let n = receivers.points.len();
+        if n == 0 || occluder.bounds().is_empty() || directions.is_empty() {
+            return Ok(None);
+        }
+        let threads = u32::try_from(n)
+            .map_err(|_| Error::Invalid(format!("snow: {n} receivers are too many for the GPU")))?;
+        let pipeline = ctx.pipeline(
+            "snow arrival",
+            &[
+                shader!("common/dispatch.wgsl"),
+                shader!("snow/arrival.wgsl"),
+            ],
+            entry,
+        )?;
+        let four = |v: Vec3| v.extend(0.0);
+        let points: Vec<Vec4> = receivers.points.iter().copied().map(four).collect();
+        let normals: Vec<Vec4> = receivers.normals.iter().copied().map(four).collect();
+        Ok(Some(LookupRun {
+            n,
+            threads,
+            pipeline,
+            points: ctx.storage_buffer("snow receivers", &points)?,
+            normals: ctx.storage_buffer("snow receiver normals", &normals)?,
+            counts: ctx.zeroed_buffer("snow arrival counts", n as u64 * 4)?,
+            uniform: ctx.uniform_buffer("snow lookup params", &LookupParams::zeroed()),
+        }))
+    }
+
+    /// Records and submits one direction's look-ups against the map bound at `map_binding`.
+    fn look_up(
+        &self,
+        ctx: &GpuContext,
+        params: &LookupParams,
+        map_binding: u32,
+        map: &wgpu::Buffer,
+    ) {
+        // Queue writes land before the next submission and after the previous one's work,
+        // so one uniform (and one map buffer) serves every direction.
+        ctx.queue
+            .write_buffer(&self.uniform, 0, bytemuck::bytes_of(params));
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("snow arrival"),
+            });
+        record_pass(
+            ctx,
+            &mut encoder,
+            "snow arrival",
+            &self.pipeline,
+            &[
+                (0, &self.uniform),
+                (1, &self.points),
+                (2, &self.normals),
+                (map_binding, map),
+                (4, &self.counts),
+            ],
+            Dispatch::Threads(self.threads),
+            None,
+        );
+        submit(ctx, encoder, None);
+    }
+
+    /// The counts, read back (the deposit that uses them runs on the CPU).
+    fn finish(self, ctx: &GpuContext, directions: u32) -> Result<Arrival> {
+        let mut out: Vec<u32> = ctx.read_buffer(&self.counts)?;
+        out.truncate(self.n);
+        Ok(Arrival {
+            counts: out,
+            directions,
+        })
+    }
 }
 
 /// The arrival look-ups on the GPU (`shaders/snow/arrival.wgsl`): for each direction, the
@@ -248,6 +368,9 @@ struct LookupParams {
 /// projection is f32 that a shader compiler may fuse or reorder, so a receiver exactly at the
 /// bias threshold or a texel edge can come out the other way than on the CPU:
 /// `tests/tests/gpu_snow.rs` measures how many.
+///
+/// With the GPU rasteriser, [`GpuSnowArrival::arrival_resident`] reads each map where it was
+/// rendered instead: no map is read back or uploaded, and the counts are the same.
 #[derive(Debug, Default)]
 pub struct GpuSnowArrival;
 
@@ -266,34 +389,16 @@ impl GpuSnowArrival {
         params: &SnowParams,
         mut rasterize: impl FnMut(&Mesh, &Camera, u32, u32, &RasterOptions) -> Result<DepthMap>,
     ) -> Result<Arrival> {
-        let n = receivers.points.len();
-        let bounds = occluder.bounds();
         let directions_rendered = directions.len() as u32;
-        if n == 0 || bounds.is_empty() || directions.is_empty() {
+        let Some(run) = LookupRun::start(ctx, occluder, receivers, directions, "lookup")? else {
             return Ok(Arrival {
-                counts: vec![0; n],
+                counts: vec![0; receivers.points.len()],
                 directions: directions_rendered,
             });
-        }
-        let threads = u32::try_from(n)
-            .map_err(|_| Error::Invalid(format!("snow: {n} receivers are too many for the GPU")))?;
-        let lookup = ctx.pipeline(
-            "snow arrival",
-            &[
-                shader!("common/dispatch.wgsl"),
-                shader!("snow/arrival.wgsl"),
-            ],
-            "lookup",
-        )?;
-        let four = |v: Vec3| v.extend(0.0);
-        let points: Vec<Vec4> = receivers.points.iter().copied().map(four).collect();
-        let normals: Vec<Vec4> = receivers.normals.iter().copied().map(four).collect();
-        let points = ctx.storage_buffer("snow receivers", &points)?;
-        let normals = ctx.storage_buffer("snow receiver normals", &normals)?;
-        let counts = ctx.zeroed_buffer("snow arrival counts", n as u64 * 4)?;
+        };
+        let bounds = occluder.bounds();
         let res = params.resolution;
         let map_buffer = ctx.zeroed_buffer("snow depth map", res as u64 * res as u64 * 4)?;
-        let uniform = ctx.uniform_buffer("snow lookup params", &LookupParams::zeroed());
         let mut texels = Vec::new();
         for &dir in directions {
             let cam = snow_camera(&bounds, dir, res)?;
@@ -312,53 +417,61 @@ impl GpuSnowArrival {
                     .zip(&map.coverage)
                     .map(|(&d, &c)| if c { d } else { f32::MAX }),
             );
-            let f = look.frame;
-            let p = LookupParams {
-                eye: four(f.eye).to_array(),
-                right: four(f.right).to_array(),
-                up: four(f.up).to_array(),
-                forward: four(f.forward).to_array(),
-                dir: four(dir).to_array(),
-                k: look.k,
-                centre: look.centre,
-                texel: look.texel,
-                bias_texels: params.bias_texels,
-                res: look.res,
-                receivers: threads,
-                _pad: [0; 2],
-            };
-            // Queue writes land before the next submission and after the previous one's
-            // work, so one map buffer serves every direction.
             ctx.queue
                 .write_buffer(&map_buffer, 0, bytemuck::cast_slice(&texels));
-            ctx.queue.write_buffer(&uniform, 0, bytemuck::bytes_of(&p));
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("snow arrival"),
-                });
-            record_pass(
-                ctx,
-                &mut encoder,
-                "snow arrival",
-                &lookup,
-                &[
-                    (0, &uniform),
-                    (1, &points),
-                    (2, &normals),
-                    (3, &map_buffer),
-                    (4, &counts),
-                ],
-                Dispatch::Threads(threads),
-                None,
-            );
-            submit(ctx, encoder, None);
+            let p = LookupParams::new(&look, dir, params, run.threads, 0);
+            run.look_up(ctx, &p, 3, &map_buffer);
         }
-        let mut out: Vec<u32> = ctx.read_buffer(&counts)?;
-        out.truncate(n);
-        Ok(Arrival {
-            counts: out,
-            directions: directions_rendered,
-        })
+        run.finish(ctx, directions_rendered)
+    }
+
+    /// [`GpuSnowArrival::arrival_with`] with `raster`'s depth maps, each read where it was
+    /// rendered ([`GpuRasterizer::depth_map_resident`]): the same maps (the same render, the
+    /// same floats: a texel the host path would upload as uncovered is read as uncovered),
+    /// the same test, so the same counts, without a map's read-back (8 bytes a texel, rows
+    /// padded) and upload (4 bytes a texel) per direction. The counts are read back: the
+    /// deposit is on the CPU.
+    pub fn arrival_resident(
+        &mut self,
+        ctx: &GpuContext,
+        raster: &mut GpuRasterizer,
+        occluder: &Mesh,
+        receivers: &Receivers,
+        directions: &[Vec3],
+        params: &SnowParams,
+    ) -> Result<Arrival> {
+        let directions_rendered = directions.len() as u32;
+        let Some(run) =
+            LookupRun::start(ctx, occluder, receivers, directions, "lookup_resident")?
+        else {
+            return Ok(Arrival {
+                counts: vec![0; receivers.points.len()],
+                directions: directions_rendered,
+            });
+        };
+        let bounds = occluder.bounds();
+        let res = params.resolution;
+        for &dir in directions {
+            let cam = snow_camera(&bounds, dir, res)?;
+            let map =
+                raster.depth_map_resident(ctx, occluder, &cam, res, res, &RasterOptions::default())?;
+            let look = Lookup::for_camera(&map.camera, map.height);
+            let p = LookupParams::new(&look, dir, params, run.threads, map.row_texels);
+            run.look_up(ctx, &p, 5, map.texels());
+        }
+        run.finish(ctx, directions_rendered)
+    }
+
+    /// A closure over `ctx` and `raster` for
+    /// [`SnowSim::step_with_parts`](super::SnowSim::step_with_parts)'s arrival:
+    /// [`GpuSnowArrival::arrival_resident`].
+    pub fn resident<'a>(
+        &'a mut self,
+        ctx: &'a GpuContext,
+        raster: &'a mut GpuRasterizer,
+    ) -> impl FnMut(&Mesh, &Receivers, &[Vec3], &SnowParams) -> Result<Arrival> + 'a {
+        move |occluder, receivers, directions, params| {
+            self.arrival_resident(ctx, raster, occluder, receivers, directions, params)
+        }
     }
 }

@@ -67,3 +67,66 @@ pub use arrival::{Arrival, Receivers, fall_directions};
 pub use cpu::{GroundCover, GroundSnow, MeshSnow, SnowCover, SnowSim, SnowStep};
 pub use params::SnowParams;
 pub use relax::{QUANTUM, RelaxReport};
+
+/// What a Snow node reports per frame.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SnowFrameMetrics {
+    pub frame: u32,
+    /// Receivers reached from at least one direction.
+    pub reached: usize,
+    /// Snow on the ground, m³ (with a ground).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ground_snow_volume: Option<f64>,
+    /// The deepest snow on the first mesh, m.
+    pub mesh_max_depth: f32,
+}
+
+impl SnowSim {
+    /// The frame's figures after [`SnowSim::step`] gave `step`.
+    pub fn frame_metrics(&self, frame: u32, step: &SnowStep) -> SnowFrameMetrics {
+        SnowFrameMetrics {
+            frame,
+            reached: step.reached,
+            ground_snow_volume: self.ground().map(|g| g.volume()),
+            mesh_max_depth: self.mesh_depth(0).iter().copied().fold(0.0f32, f32::max),
+        }
+    }
+}
+
+/// A flat ground of `resolution` square cells over `size` (x, z) at `height`, centred on the
+/// origin unless `origin` (the centre of cell (0, 0)) is given.
+pub fn flat_ground(
+    size: (f32, f32),
+    resolution: (u32, u32),
+    origin: Option<(f32, f32)>,
+    height: f32,
+) -> imprint_core::Result<imprint_core::HeightField> {
+    use imprint_core::Error;
+    let (nx, nz) = resolution;
+    if nx == 0 || nz == 0 {
+        return Err(Error::Invalid(format!(
+            "ground resolution must be at least 1 x 1, got {nx} x {nz}"
+        )));
+    }
+    let cell = size.0 / nx as f32;
+    if !(cell.is_finite() && cell > 0.0) || (size.1 / nz as f32 - cell).abs() > 1e-6 * cell {
+        return Err(Error::Invalid(format!(
+            "ground cells must be square: size ({}, {}) over resolution ({nx}, {nz}) gives \
+             {} x {}",
+            size.0,
+            size.1,
+            cell,
+            size.1 / nz as f32
+        )));
+    }
+    let origin = match origin {
+        Some((x, z)) => glam::Vec2::new(x, z),
+        None => glam::Vec2::new(-size.0, -size.1) * 0.5 + glam::Vec2::splat(cell * 0.5),
+    };
+    imprint_core::HeightField::new(
+        origin,
+        cell,
+        glam::UVec2::new(nx, nz),
+        vec![height; nx as usize * nz as usize],
+    )
+}

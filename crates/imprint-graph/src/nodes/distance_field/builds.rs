@@ -3,7 +3,8 @@
 //! its mesh and voxeliser.
 
 use crate::schedule::Schedule;
-use imprint_core::{Boundary, BoundaryVariant, DistanceField, GridSpec, Mesh};
+use imprint_core::{Boundary, BoundaryVariant, DistanceField, Mesh};
+use serde::{Deserialize, Serialize};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::FieldBuilder;
 use imprint_stages::sdf::cpu::FieldBuild;
@@ -28,15 +29,6 @@ pub enum Published {
 }
 
 impl Published {
-    /// The field itself (a blend is computed, see [`DistanceField::blend`]).
-    pub fn field(&self) -> imprint_core::Result<Arc<DistanceField>> {
-        match self {
-            Published::One(f) => Ok(f.clone()),
-            Published::Blend { a, b, weight, .. } => {
-                Ok(Arc::new(DistanceField::blend(a, b, *weight)?))
-            }
-        }
-    }
 }
 
 /// The mesh and voxeliser an interpolated field evaluates at keyframe times.
@@ -54,12 +46,10 @@ impl Ahead {
         Ok((Arc::new(mesh), b))
     }
 
-    pub fn spec(&self) -> &GridSpec {
-        self.voxelizer.spec()
-    }
 }
 
 /// A build under way: its keyframe and the next part to run.
+#[derive(Serialize, Deserialize)]
 struct Job {
     key: i64,
     next: u32,
@@ -73,16 +63,23 @@ pub struct FieldSchedule {
     pub schedule: Schedule,
     pub band: f32,
     pub builder: FieldBuilder,
-    job: Option<Job>,
     pub ahead: Option<Ahead>,
-    /// Interpolate: builds by keyframe (the segment's two, and the next once finished).
-    keys: BTreeMap<i64, Arc<DistanceField>>,
+    /// What it carries between frames (a checkpoint holds it).
+    state: BuildState,
     /// Interpolate: the builds finished on this frame, with their meshes (for measurement).
     pub finished: Vec<(Arc<DistanceField>, Arc<Mesh>)>,
 }
 
+/// A field node's builds between frames.
+#[derive(Default, Serialize, Deserialize)]
+pub struct BuildState {
+    job: Option<Job>,
+    /// Interpolate: builds by keyframe (the segment's two, and the next once finished).
+    keys: BTreeMap<i64, Arc<DistanceField>>,
+}
+
 /// What a field node did on a frame.
-pub struct Step {
+pub struct BuildStep {
     /// A new value for consumers (None: they keep the last one).
     pub published: Option<Published>,
     /// Whether it computed anything (a build or a part of one).
@@ -97,9 +94,8 @@ impl FieldSchedule {
             schedule,
             band,
             builder: FieldBuilder::default(),
-            job: None,
             ahead,
-            keys: BTreeMap::new(),
+            state: BuildState::default(),
             finished: Vec::new(),
         }
     }
@@ -112,21 +108,21 @@ impl FieldSchedule {
         frame: i64,
         first: bool,
         changed: bool,
-        boundary: &Boundary,
-    ) -> imprint_core::Result<Step> {
+        boundary: impl FnOnce() -> imprint_core::Result<Arc<Boundary>>,
+    ) -> imprint_core::Result<BuildStep> {
         let sc = self.schedule;
-        if let Some(job) = self.job.as_mut() {
+        if let Some(job) = self.state.job.as_mut() {
             job.build.run_part(job.next, sc.split);
             job.next += 1;
             if job.next < sc.split {
-                return Ok(Step {
+                return Ok(BuildStep {
                     published: None,
                     worked: true,
                     began: false,
                 });
             }
-            let job = self.job.take().expect("a job");
-            return Ok(Step {
+            let job = self.state.job.take().expect("a job");
+            return Ok(BuildStep {
                 published: Some(Published::One(Arc::new(
                     job.build.finish(&mut self.builder),
                 ))),
@@ -135,29 +131,29 @@ impl FieldSchedule {
             });
         }
         if first || (sc.split == 1 && sc.is_key(frame) && changed) {
-            let f = self.builder.build(boundary, self.band)?;
-            return Ok(Step {
+            let f = self.builder.build(&*boundary()?, self.band)?;
+            return Ok(BuildStep {
                 published: Some(Published::One(Arc::new(f))),
                 worked: true,
                 began: true,
             });
         }
         if sc.is_key(frame) && changed {
-            let mut build = self.builder.start(boundary, self.band)?;
+            let mut build = self.builder.start(&*boundary()?, self.band)?;
             build.run_part(0, sc.split);
-            self.job = Some(Job {
+            self.state.job = Some(Job {
                 key: frame,
                 next: 1,
                 build,
                 mesh: None,
             });
-            return Ok(Step {
+            return Ok(BuildStep {
                 published: None,
                 worked: true,
                 began: true,
             });
         }
-        Ok(Step {
+        Ok(BuildStep {
             published: None,
             worked: false,
             began: false,
@@ -172,21 +168,21 @@ impl FieldSchedule {
         frame: i64,
         first_frame: i64,
         is_static: bool,
-    ) -> imprint_core::Result<Step> {
+    ) -> imprint_core::Result<BuildStep> {
         let sc = self.schedule;
         self.finished.clear();
         let mut worked = false;
         if is_static {
-            if self.keys.is_empty() {
+            if self.state.keys.is_empty() {
                 let f = self.build_now(first_frame)?;
-                self.keys.insert(first_frame, f);
-                return Ok(Step {
-                    published: Some(Published::One(self.keys[&first_frame].clone())),
+                self.state.keys.insert(first_frame, f);
+                return Ok(BuildStep {
+                    published: Some(Published::One(self.state.keys[&first_frame].clone())),
                     worked: true,
                     began: true,
                 });
             }
-            return Ok(Step {
+            return Ok(BuildStep {
                 published: None,
                 worked: false,
                 began: false,
@@ -195,7 +191,7 @@ impl FieldSchedule {
         // The next build's part for this frame, if any (it finishes on the frame that first
         // needs it).
         if let Some((key, part)) = sc.ahead_part_at(frame)
-            && !self.keys.contains_key(&key)
+            && !self.state.keys.contains_key(&key)
         {
             if part == 0 {
                 let ahead = self
@@ -204,42 +200,42 @@ impl FieldSchedule {
                     .expect("interpolated fields have a mesh");
                 let (mesh, b) = ahead.boundary_at(key)?;
                 let build = self.builder.start(&b, self.band)?;
-                self.job = Some(Job {
+                self.state.job = Some(Job {
                     key,
                     next: 0,
                     build,
                     mesh: Some(mesh),
                 });
             }
-            if let Some(job) = self.job.as_mut().filter(|j| j.key == key && j.next == part) {
+            if let Some(job) = self.state.job.as_mut().filter(|j| j.key == key && j.next == part) {
                 job.build.run_part(part, sc.split);
                 job.next += 1;
                 worked = true;
                 if job.next == sc.split {
-                    let job = self.job.take().expect("a job");
+                    let job = self.state.job.take().expect("a job");
                     let f = Arc::new(job.build.finish(&mut self.builder));
                     self.finished.push((
                         f.clone(),
                         job.mesh.expect("interpolated jobs keep the mesh"),
                     ));
-                    self.keys.insert(key, f);
+                    self.state.keys.insert(key, f);
                 }
             }
         }
         let (a, weight) = sc.segment(frame, first_frame);
         let b = a + sc.every as i64;
         for k in [a, b] {
-            if !self.keys.contains_key(&k) {
+            if !self.state.keys.contains_key(&k) {
                 let f = self.build_now(k)?;
-                self.keys.insert(k, f);
+                self.state.keys.insert(k, f);
                 worked = true;
             }
         }
-        self.keys.retain(|&k, _| k >= a);
-        Ok(Step {
+        self.state.keys.retain(|&k, _| k >= a);
+        Ok(BuildStep {
             published: Some(Published::Blend {
-                a: self.keys[&a].clone(),
-                b: self.keys[&b].clone(),
+                a: self.state.keys[&a].clone(),
+                b: self.state.keys[&b].clone(),
                 a_key: a,
                 every: sc.every,
                 weight,
@@ -247,6 +243,15 @@ impl FieldSchedule {
             worked,
             began: worked,
         })
+    }
+
+    /// What it carries between frames, for a checkpoint.
+    pub fn state(&self) -> &BuildState {
+        &self.state
+    }
+
+    pub fn set_state(&mut self, state: BuildState) {
+        self.state = state;
     }
 
     /// Keyframe `key`'s build, whole, now.

@@ -1,31 +1,182 @@
-//! The Skin node between frames: its rig, its rest mesh, the method's state (automatic
-//! weights for the blends, the particle simulation), and what it measures each frame.
+//! `Skin`: a mesh deformed by a rig (Tokoi's particle skinning with adaptive radii, or linear
+//! blend or dual quaternion skinning), with its volume and joint sections per frame.
 //!
 //! **Rest mesh.** The rig's bound OBJ, or the input Mesh node's first value: the rig's bones
 //! are in the same space, so a fitted Mesh node must be fitted where the rig's bones are.
 //!
 //! **Measures** (`report.json`, per frame): the posed mesh's volume over the rest volume, and
-//! for each joint (a bone with a parent) the area of the mesh's section by the plane through
-//! the joint that halves the angle between the two bones, over the same at rest. The
-//! candy-wrapper collapse of LBS under a twist shows as a section ratio near 0, the loss at
-//! a bend as a volume ratio below 1.
+//! each joint's section over the same at rest (`imprint_stages::skin::measure::joint_measures`).
 
-use crate::schema::{SkinMethod, SkinNode};
+use crate::node::{
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    load_state, save_state,
+};
+use crate::schema::defaults;
+use crate::value::{MeshIn, Value};
 use glam::{Affine3A, Vec3};
 use imprint_core::{Error, Mesh, Result};
 use imprint_gpu::GpuContext;
 use imprint_stages::skin::gpu::{BlendMethod, GpuBlend};
 use imprint_stages::skin::gpu_particles::GpuParticleSkin;
+use imprint_stages::skin::measure::joint_measures;
 use imprint_stages::skin::particles::ParticleSkin;
-use imprint_stages::skin::rig::{Pose, Rig};
+use imprint_stages::skin::rig::Rig;
 use imprint_stages::skin::weights::{self, Weights};
-use imprint_stages::skin::{blend, measure};
-use serde_json::{Map, Value, json};
+use imprint_stages::skin::blend;
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value as Json, json};
+use std::any::Any;
 use std::path::Path;
 use std::sync::Arc;
 
+/// The Skin node: which mesh, which rig, which method.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkinNode {
+    /// The Mesh node in the rig's rest pose (its first frame is taken as the rest). Leave it
+    /// out to load the OBJ the rig file binds (`mesh:` in the rig).
+    #[serde(default)]
+    pub mesh: Option<String>,
+    /// The rig file (RON: bones, binding, animation), relative to the pipeline file.
+    pub rig: String,
+    /// `Particles(...)` (T, default parameters suit a limb of radius ~0.1 m),
+    /// `Linear(...)` or `DualQuaternion(...)`.
+    pub method: SkinMethod,
+    /// Added to the output's positions (to stand several methods side by side), m.
+    #[serde(default)]
+    pub offset: (f32, f32, f32),
+    #[serde(default)]
+    pub backend: Option<Backend>,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "defaults::yes")]
+    pub enabled: bool,
+}
+
+/// How a Skin node deforms its mesh.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum SkinMethod {
+    /// Tokoi's particle skinning: `imprint_stages::skin::particles::ParticleParams`.
+    Particles(#[serde(default)] imprint_stages::skin::particles::ParticleParams),
+    /// Linear blend skinning with automatic weights.
+    Linear {
+        #[serde(default)]
+        weights: imprint_stages::skin::weights::WeightMethod,
+    },
+    /// Dual quaternion skinning with automatic weights.
+    DualQuaternion {
+        #[serde(default)]
+        weights: imprint_stages::skin::weights::WeightMethod,
+    },
+}
+
+impl Node for SkinNode {
+    fn kind(&self) -> &'static str {
+        "Skin"
+    }
+    fn inputs(&self) -> Vec<Port<'_>> {
+        self.mesh
+            .iter()
+            .map(|m| Port::new("mesh", m, PortType::Mesh))
+            .collect()
+    }
+    fn output(&self) -> Option<PortType> {
+        Some(PortType::Mesh)
+    }
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn trigger(&self) -> Trigger {
+        Trigger::EveryFrame
+    }
+    fn backend(&self) -> Option<Backend> {
+        self.backend
+    }
+    fn has_gpu_path(&self) -> bool {
+        true
+    }
+    fn track(&self) -> Option<Track> {
+        Some(Track::Vertices)
+    }
+    fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
+        let full = ctx.base_dir.join(&self.rig);
+        if !full.is_file() {
+            return Err(ctx.fail(
+                "rig",
+                format!("rig file not found: {}", full.display()),
+            ));
+        }
+        // The rig file's own errors name its file, line and column.
+        let loaded = crate::rig::load(&full)?;
+        if self.mesh.is_none() && loaded.mesh.is_none() {
+            return Err(ctx.fail(
+                "mesh",
+                format!(
+                    "give the Mesh node to skin (mesh: \"...\"), or bind one in {} (mesh: \"file.obj\")",
+                    full.display()
+                ),
+            ));
+        }
+        let offset = Vec3::from(self.offset);
+        if !offset.is_finite() {
+            return Err(ctx.fail("offset", format!("offset {offset} must be finite")));
+        }
+        match &self.method {
+            SkinMethod::Particles(p) => p.validate(),
+            SkinMethod::Linear { weights } | SkinMethod::DualQuaternion { weights } => {
+                weights.validate()
+            }
+        }
+        .map_err(|e| ctx.fail("method", e))?;
+        Ok(())
+    }
+    fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>> {
+        let gpu = ctx.choose_gpu()?;
+        let input = self.mesh.as_ref().map(|m| ctx.mesh_in(m));
+        let stage = SkinStage::new(ctx.name(), self, ctx.check.base_dir, gpu)?;
+        Ok(Box::new(SkinNodeStage { input, stage }))
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// The Skin node at run time: its input and the skinning state.
+struct SkinNodeStage {
+    input: Option<MeshIn>,
+    stage: SkinStage,
+}
+
+impl Stage for SkinNodeStage {
+    fn run(&mut self, ctx: &mut FrameCtx<'_>) -> Result<Step> {
+        let mesh_in = match &self.input {
+            Some(i) => Some(ctx.values.mesh(i)?.clone()),
+            None => None,
+        };
+        let (mesh, m) = self
+            .stage
+            .frame(mesh_in.as_ref(), ctx.frame, ctx.fps)
+            .map_err(|e| ctx.at_node(e))?;
+        if ctx.first {
+            for (k, v) in self.stage.summary() {
+                ctx.metric(&k, v);
+            }
+        }
+        ctx.push_per_frame(m);
+        Ok(Step::computed(Value::Mesh(Arc::new(mesh))))
+    }
+    fn save(&self) -> Result<Vec<u8>> {
+        self.stage.save()
+    }
+    fn load(&mut self, bytes: &[u8]) -> Result<()> {
+        self.stage.load(bytes)
+    }
+    fn on_gpu(&self) -> bool {
+        self.stage.on_gpu()
+    }
+}
+
 /// A Skin node's state.
-pub struct SkinStage {
+struct SkinStage {
     name: String,
     rig: Rig,
     method: SkinMethod,
@@ -55,7 +206,7 @@ enum State {
 impl SkinStage {
     /// Loads the rig (and the mesh it binds, when the node names none). With `gpu`, the node
     /// runs there (the blends, or the particles' substeps and vertices).
-    pub fn new(
+    fn new(
         name: &str,
         node: &SkinNode,
         base_dir: &Path,
@@ -84,6 +235,51 @@ impl SkinStage {
         self.gpu.is_some()
     }
 
+    /// The rest mesh, the particles (when the method has them) and the last frame's bones.
+    fn save(&self) -> Result<Vec<u8>> {
+        let particles = match &self.state {
+            Some(State::Particles(_, Some(_))) => {
+                return Err(Error::Run(format!(
+                    "node '{}': particle skinning on the GPU cannot be checkpointed yet (its \
+                     particles stay on the GPU); run it with backend: Cpu",
+                    self.name
+                )));
+            }
+            Some(State::Particles(sim, None)) => Some(&**sim),
+            _ => None,
+        };
+        save_state(&(&self.rest, particles, &self.last_skin))
+    }
+
+    /// Takes back what [`SkinStage::save`] gave: the method's state is built again from the
+    /// rest mesh (weights, GPU buffers), the particles are the saved ones.
+    fn load(&mut self, bytes: &[u8]) -> Result<()> {
+        type Saved = (Option<Arc<Mesh>>, Option<ParticleSkin>, Option<Vec<Affine3A>>);
+        let (rest, particles, last_skin): Saved = load_state(bytes)?;
+        self.state = None;
+        if let Some(rest) = rest {
+            self.begin(&rest)?;
+            self.rest = Some(rest);
+        }
+        if let (Some(State::Particles(sim, _)), Some(p)) = (&mut self.state, particles) {
+            **sim = p;
+        }
+        self.last_skin = last_skin;
+        Ok(())
+    }
+
+    /// The method's state and the rest measures, from the rest mesh.
+    fn begin(&mut self, rest: &Mesh) -> Result<()> {
+        self.state = Some(self.build(rest)?);
+        let identity = vec![glam::Quat::IDENTITY; self.rig.bones.len()];
+        self.rest_measures = Some(joint_measures(
+            &self.rig,
+            rest,
+            &self.rig.pose_local(&identity, Vec3::ZERO),
+        ));
+        Ok(())
+    }
+
     /// The posed mesh at frame `frame` (time `frame / fps`) and the frame's metrics. `input`
     /// is the node's Mesh input, if it has one (read on the first frame only: the rest pose).
     pub fn frame(
@@ -91,7 +287,7 @@ impl SkinStage {
         input: Option<&Arc<Mesh>>,
         frame: u32,
         fps: f32,
-    ) -> Result<(Mesh, Value)> {
+    ) -> Result<(Mesh, Json)> {
         let (time, dt_frame) = (frame as f32 / fps, 1.0 / fps);
         let rest = match (&self.rest, input) {
             (Some(r), _) => r.clone(),
@@ -99,16 +295,15 @@ impl SkinStage {
                 self.rest = Some(m.clone());
                 m.clone()
             }
-            (None, None) => unreachable!("the plan checks that a Skin node has a mesh"),
+            (None, None) => {
+                return Err(Error::Invalid(format!(
+                    "node '{}': no mesh to skin",
+                    self.name
+                )));
+            }
         };
         if self.state.is_none() {
-            self.state = Some(self.build(&rest)?);
-            let identity = vec![glam::Quat::IDENTITY; self.rig.bones.len()];
-            self.rest_measures = Some(measures(
-                &self.rig,
-                &rest,
-                &self.rig.pose_local(&identity, Vec3::ZERO),
-            ));
+            self.begin(&rest)?;
         }
         let pose = self.rig.pose(time);
         let mut metrics = Map::new();
@@ -137,13 +332,13 @@ impl SkinStage {
                 let mut step = |start: &[Affine3A],
                                 end: &[Affine3A],
                                 k: u32,
-                                metrics: Option<&mut Map<String, Value>>|
+                                metrics: Option<&mut Map<String, Json>>|
                  -> Result<()> {
                     match (ctx, gpu.as_mut()) {
                         (Some(ctx), Some(g)) => g.step_frame(ctx, start, end, k, dt_frame),
                         _ => {
                             let m = sim.step_frame(start, end, k, dt_frame)?;
-                            if let (Some(out), Value::Object(o)) =
+                            if let (Some(out), Json::Object(o)) =
                                 (metrics, serde_json::to_value(m).expect("plain data"))
                             {
                                 out.extend(o);
@@ -177,7 +372,7 @@ impl SkinStage {
             }
         };
         let (rest_volume, rest_sections) = self.rest_measures.as_ref().expect("built above");
-        let (volume, sections) = measures(&self.rig, &mesh, &pose);
+        let (volume, sections) = joint_measures(&self.rig, &mesh, &pose);
         metrics.insert("frame".into(), frame.into());
         metrics.insert("volume".into(), volume.into());
         metrics.insert("volume_ratio".into(), (volume / rest_volume).into());
@@ -188,18 +383,18 @@ impl SkinStage {
                 json!({ "section": area, "section_ratio": area / rest_area }),
             );
         }
-        metrics.insert("joints".into(), Value::Object(joints));
+        metrics.insert("joints".into(), Json::Object(joints));
         self.last_skin = Some(pose.skin);
         if self.offset != Vec3::ZERO {
             for p in &mut mesh.positions {
                 *p += self.offset;
             }
         }
-        Ok((mesh, Value::Object(metrics)))
+        Ok((mesh, Json::Object(metrics)))
     }
 
     /// What the node reports once (the particle fill's counts), as (key, value) pairs.
-    pub fn summary(&self) -> Vec<(String, Value)> {
+    pub fn summary(&self) -> Vec<(String, Json)> {
         match &self.state {
             Some(State::Particles(sim, _)) => {
                 let f = sim.fill_report();
@@ -256,20 +451,4 @@ impl SkinStage {
     fn joints(&self) -> impl Iterator<Item = usize> + '_ {
         (0..self.rig.bones.len()).filter(|&b| self.rig.bones[b].parent.is_some())
     }
-}
-
-/// The mesh's volume and its section at each joint (bones with a parent, file order), the
-/// plane through the bone's head halving the angle between it and its parent.
-fn measures(rig: &Rig, mesh: &Mesh, pose: &Pose) -> (f64, Vec<f64>) {
-    let seg = rig.posed_segments(pose);
-    let sections = (0..rig.bones.len())
-        .filter_map(|b| {
-            let parent = rig.index(rig.bones[b].parent.as_deref()?)?;
-            let dir = |(h, t): (Vec3, Vec3)| (t - h).normalize_or_zero();
-            let (dp, db) = (dir(seg[parent]), dir(seg[b]));
-            let normal = (dp + db).try_normalize().unwrap_or(db);
-            Some(measure::cross_section_area(mesh, seg[b].0, normal))
-        })
-        .collect();
-    (measure::volume(mesh), sections)
 }

@@ -1,0 +1,433 @@
+//! The executor: an object that runs a plan one frame at a time. It builds each node's stage
+//! once, then per frame runs the nodes wave by wave (a wave: nodes whose inputs all come from
+//! earlier waves, so no path joins two of them), the nodes of a wave at once on the rayon
+//! pool. A node reads its inputs' current values and publishes a new value or nothing; a
+//! consumer's inputs changed when a producer published since it last took them in. The
+//! results never depend on the wave's order or the thread count: each node reads only what
+//! earlier waves published, and the executor applies a wave's results in plan order.
+
+mod checkpoint;
+mod reload;
+
+pub use checkpoint::{CHECKPOINT_FILE, Checkpoint, checkpoint_path};
+
+use crate::exec::{Observed, Observer, RunOptions};
+use crate::node::{BuildCtx, CheckCtx, FrameCtx, Stage, Step};
+use crate::plan::Plan;
+use crate::report::{FrameTransfers, NodeReport, Report};
+use crate::schedule::Schedule;
+use crate::value::{Value, Values};
+use imprint_core::{Aabb, Error};
+use imprint_gpu::GpuContext;
+use imprint_gpu::transfer;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::time::Instant;
+
+/// A running node: its stage, what it last took in, its report.
+pub(crate) struct Slot {
+    pub name: String,
+    /// Its input nodes, in port order.
+    inputs: Vec<String>,
+    schedule: Schedule,
+    pub stage: Box<dyn Stage>,
+    pub report: NodeReport,
+    /// Its inputs' versions when it last took them in.
+    pub seen: Option<Vec<u64>>,
+}
+
+/// What one frame did: its time, and each node's (for a live view).
+#[derive(Clone, Debug)]
+pub struct FrameSummary {
+    pub frame: u32,
+    pub ms: f64,
+    /// (node, ms, computed or wrote) in plan order.
+    pub nodes: Vec<(String, f64, bool)>,
+}
+
+/// Runs a plan frame by frame; see the module doc.
+pub struct Executor {
+    pub(crate) plan: Plan,
+    pub(crate) opts: RunOptions,
+    pub(crate) frames: Range<u32>,
+    /// The next frame [`Executor::step`] runs.
+    pub(crate) next: u32,
+    pub(crate) gpu: Option<&'static GpuContext>,
+    pub(crate) slots: Vec<Slot>,
+    /// Indices into `slots`, wave by wave.
+    waves: Vec<Vec<usize>>,
+    pub(crate) values: Values,
+    /// Each node's output version: it goes up with every value the node publishes.
+    pub(crate) versions: BTreeMap<String, u64>,
+    /// The boxes Mesh nodes sweep over the run (fitted grids use them).
+    pub(crate) swept: BTreeMap<String, Aabb>,
+    /// The report's run-wide part (its nodes are the slots').
+    pub(crate) report: Report,
+    pub(crate) started: Instant,
+    /// Checkpoints kept in memory for `seek`, by next frame, and how often.
+    kept: BTreeMap<u32, Vec<u8>>,
+    keep_every: u32,
+}
+
+impl Executor {
+    /// Builds every running node's stage (loading meshes and rigs, choosing backends).
+    pub fn new(plan: &Plan, opts: RunOptions) -> crate::Result<Self> {
+        let frames = opts.frames.clone().unwrap_or(0..plan.file.frames);
+        if frames.is_empty() || frames.end > plan.file.frames {
+            return Err(Error::Invalid(format!(
+                "--frames {}..{} is outside the pipeline's 0..{}",
+                frames.start, frames.end, plan.file.frames
+            ))
+            .into());
+        }
+        let mut ex = Executor {
+            plan: plan.clone(),
+            next: frames.start,
+            frames,
+            opts,
+            gpu: None,
+            slots: Vec::new(),
+            waves: Vec::new(),
+            values: Values::default(),
+            versions: BTreeMap::new(),
+            swept: BTreeMap::new(),
+            report: Report {
+                pipeline: plan.source.name.clone(),
+                fps: plan.file.fps,
+                threads: rayon::current_num_threads(),
+                pruned: plan.pruned.clone(),
+                warnings: plan.warnings.clone(),
+                ..Default::default()
+            },
+            started: Instant::now(),
+            kept: BTreeMap::new(),
+            keep_every: 0,
+        };
+        for name in &plan.order {
+            let slot = ex.build_slot(name)?;
+            ex.slots.push(slot);
+        }
+        ex.waves = waves(&ex.slots);
+        ex.report.adapter = ex.gpu.map(|g| g.adapter_name());
+        Ok(ex)
+    }
+
+    /// Node `name`'s stage, built fresh.
+    pub(crate) fn build_slot(&mut self, name: &str) -> crate::Result<Slot> {
+        let plan = &self.plan;
+        let spec = plan.file.nodes[name].node();
+        let want = self
+            .opts
+            .backend
+            .or(spec.backend())
+            .unwrap_or(plan.file.backend);
+        let lookup = |n: &str| plan.file.nodes.get(n).map(|s| s.node());
+        let mut ctx = BuildCtx {
+            check: CheckCtx {
+                source: &plan.source,
+                name,
+                base_dir: &plan.base_dir,
+                fps: plan.file.fps,
+                frames: plan.file.frames,
+                lookup: &lookup,
+            },
+            out: &self.opts.out,
+            want,
+            gpu: &mut self.gpu,
+            swept: &mut self.swept,
+            warnings: &mut self.report.warnings,
+        };
+        let stage = spec.build(&mut ctx)?;
+        let backend = if stage.on_gpu() { "gpu" } else { "cpu" };
+        Ok(Slot {
+            name: name.to_string(),
+            inputs: spec.inputs().iter().map(|p| p.node.to_string()).collect(),
+            schedule: spec.schedule(),
+            report: NodeReport {
+                kind: spec.kind().to_string(),
+                backend: backend.to_string(),
+                ..Default::default()
+            },
+            stage,
+            seen: None,
+        })
+    }
+
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// The frames this executor runs.
+    pub fn frames(&self) -> Range<u32> {
+        self.frames.clone()
+    }
+
+    /// The next frame [`Executor::step`] runs.
+    pub fn next_frame(&self) -> u32 {
+        self.next
+    }
+
+    /// Whether every frame has run.
+    pub fn done(&self) -> bool {
+        self.next >= self.frames.end
+    }
+
+    /// Node `name`'s current value (what its consumers see), if it has one.
+    pub fn value(&self, name: &str) -> Option<Value> {
+        self.values.get(name)
+    }
+
+    /// The GPU, when a node runs there (to read GPU values back).
+    pub fn gpu(&self) -> Option<&'static GpuContext> {
+        self.gpu
+    }
+
+    /// The report so far.
+    pub fn report(&self) -> Report {
+        let mut r = self.report.clone();
+        r.nodes = self
+            .slots
+            .iter()
+            .map(|s| (s.name.clone(), s.report.clone()))
+            .collect();
+        r.wall_ms = self.started.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+
+    /// Runs the next frame.
+    pub fn step(&mut self) -> crate::Result<FrameSummary> {
+        self.step_observed(None)
+    }
+
+    /// [`Executor::step`], showing every node's value to `observer` after it ran.
+    pub fn step_observed(
+        &mut self,
+        mut observer: Option<&mut dyn Observer>,
+    ) -> crate::Result<FrameSummary> {
+        if self.done() {
+            return Err(Error::Invalid(format!(
+                "the run is over: frames {}..{} have run",
+                self.frames.start, self.frames.end
+            ))
+            .into());
+        }
+        let frame = self.next;
+        let start = Instant::now();
+        let mut observed_ms = 0.0;
+        let mut summary = FrameSummary {
+            frame,
+            ms: 0.0,
+            nodes: Vec::new(),
+        };
+        for w in 0..self.waves.len() {
+            let ran = self.run_wave(w, frame)?;
+            for (i, ms, worked) in ran {
+                summary.nodes.push((self.slots[i].name.clone(), ms, worked));
+                if let Some(obs) = observer.as_deref_mut() {
+                    observed_ms += self.observe(obs, i, frame)?;
+                }
+            }
+        }
+        summary.nodes.sort_by_key(|(n, ..)| self.plan.order.iter().position(|o| o == n));
+        self.next += 1;
+        summary.ms = start.elapsed().as_secs_f64() * 1e3 - observed_ms;
+        self.report.frames.push(frame);
+        self.report.frame_ms.push(summary.ms);
+        self.keep_if_due()?;
+        Ok(summary)
+    }
+
+    /// Runs wave `w` of `frame`: its nodes at once, their results applied in plan order.
+    /// Returns (slot, ms, worked) per node.
+    fn run_wave(&mut self, w: usize, frame: u32) -> crate::Result<Vec<(usize, f64, bool)>> {
+        let wave = &self.waves[w];
+        let mut jobs: Vec<Job> = Vec::with_capacity(wave.len());
+        for &i in wave {
+            let slot = &self.slots[i];
+            let inputs: Vec<u64> = slot
+                .inputs
+                .iter()
+                .map(|n| self.versions.get(n).copied().unwrap_or(0))
+                .collect();
+            let changed = slot.seen.as_ref() != Some(&inputs);
+            let own = self.values.take(&slot.name);
+            jobs.push(Job {
+                slot: i,
+                inputs,
+                changed,
+                own,
+                outcome: None,
+            });
+        }
+        let ctx = Shared {
+            values: &self.values,
+            gpu: self.gpu,
+            frame,
+            fps: self.plan.file.fps,
+            first_frame: self.frames.start,
+        };
+        let mut slots: Vec<&mut Slot> = self
+            .slots
+            .iter_mut()
+            .enumerate()
+            .filter(|(i, _)| wave.contains(i))
+            .map(|(_, s)| s)
+            .collect();
+        slots
+            .par_iter_mut()
+            .zip(jobs.par_iter_mut())
+            .for_each(|(slot, job)| job.run(slot, &ctx));
+        let mut ran = Vec::with_capacity(jobs.len());
+        let mut failed = None;
+        for job in jobs {
+            let (i, worked, ms) = (job.slot, job.worked(), job.ms());
+            if let Err(e) = self.apply(job, frame) {
+                failed.get_or_insert(e);
+            }
+            ran.push((i, ms, worked));
+        }
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(ran),
+        }
+    }
+
+    /// A node's result: its value, its version, what it took in, its time.
+    fn apply(&mut self, mut job: Job, frame: u32) -> crate::Result<()> {
+        let (result, ms, moved) = job.outcome.take().expect("every job ran");
+        let slot = &mut self.slots[job.slot];
+        let step = match result {
+            Ok(step) => step,
+            Err(e) => {
+                // The last good value stays, for a viewer that goes on after the error.
+                if let Some(own) = job.own.take() {
+                    self.values.set(&slot.name, own);
+                }
+                return Err(e.into());
+            }
+        };
+        match (step.published, job.own.take()) {
+            (Some(v), _) => {
+                self.values.set(&slot.name, v);
+                *self.versions.entry(slot.name.clone()).or_default() += 1;
+            }
+            (None, Some(own)) => self.values.set(&slot.name, own),
+            (None, None) => {}
+        }
+        if step.consumed {
+            slot.seen = Some(job.inputs);
+        }
+        if step.worked {
+            slot.report.record(frame, ms - step.untimed_ms);
+        }
+        self.report.files_written += step.files;
+        if moved.uploaded_bytes + moved.read_back_bytes > 0 {
+            slot.report.transfers.push(FrameTransfers {
+                frame,
+                uploaded_bytes: moved.uploaded_bytes,
+                read_back_bytes: moved.read_back_bytes,
+                field_read_backs: moved.field_read_backs,
+            });
+        }
+        Ok(())
+    }
+
+    /// Shows slot `i`'s value to `obs`; returns the time it took (not the frame's), ms.
+    fn observe(&self, obs: &mut dyn Observer, i: usize, frame: u32) -> crate::Result<f64> {
+        let name = &self.slots[i].name;
+        if !obs.wants(name) {
+            return Ok(0.0);
+        }
+        let t = Instant::now();
+        match self.values.get(name) {
+            Some(Value::Mesh(m)) => obs.observe(name, frame, Observed::Mesh(&m)),
+            Some(Value::Heights(h)) => obs.observe(name, frame, Observed::Heights(&h)),
+            Some(Value::Field(f)) => obs.observe(name, frame, Observed::Field(&*f.cpu(self.gpu)?)),
+            Some(Value::Boundary(_)) | None => {}
+        }
+        Ok(t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// Whole-run outputs (contact sheets, GIFs) after the last frame; the final report.
+    pub fn finish(&mut self) -> crate::Result<Report> {
+        for slot in &mut self.slots {
+            self.report.files_written += slot.stage.finish(&mut slot.report)?;
+        }
+        Ok(self.report())
+    }
+}
+
+/// What every node of a wave shares.
+struct Shared<'a> {
+    values: &'a Values,
+    gpu: Option<&'static GpuContext>,
+    frame: u32,
+    fps: f32,
+    first_frame: u32,
+}
+
+/// One node's run within a wave.
+struct Job {
+    slot: usize,
+    /// Its inputs' versions now.
+    inputs: Vec<u64>,
+    changed: bool,
+    /// Its value, lent for the run.
+    own: Option<Value>,
+    /// The run's result, its time (ms) and the bytes it moved.
+    outcome: Option<(imprint_core::Result<Step>, f64, transfer::Transfers)>,
+}
+
+impl Job {
+    fn run(&mut self, slot: &mut Slot, s: &Shared<'_>) {
+        let t0 = Instant::now();
+        let before = transfer::snapshot();
+        let mut ctx = FrameCtx {
+            name: &slot.name,
+            frame: s.frame,
+            time: s.frame as f32 / s.fps,
+            fps: s.fps,
+            first_frame: s.first_frame,
+            first: self.own.is_none(),
+            own: self.own.take(),
+            key: slot.schedule.is_key(s.frame as i64),
+            changed: self.changed,
+            values: s.values,
+            gpu: s.gpu,
+            report: &mut slot.report,
+        };
+        let result = slot.stage.run(&mut ctx);
+        self.own = ctx.own.take();
+        let moved = transfer::snapshot().since(&before);
+        self.outcome = Some((result, t0.elapsed().as_secs_f64() * 1e3, moved));
+    }
+
+    fn worked(&self) -> bool {
+        matches!(&self.outcome, Some((Ok(s), ..)) if s.worked)
+    }
+
+    fn ms(&self) -> f64 {
+        self.outcome.as_ref().map_or(0.0, |o| o.1)
+    }
+}
+
+/// The slots in waves: a node's wave is one more than its latest input's.
+fn waves(slots: &[Slot]) -> Vec<Vec<usize>> {
+    let mut level: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut waves: Vec<Vec<usize>> = Vec::new();
+    for (i, s) in slots.iter().enumerate() {
+        let l = s
+            .inputs
+            .iter()
+            .filter_map(|n| level.get(n.as_str()).map(|l| l + 1))
+            .max()
+            .unwrap_or(0);
+        level.insert(&s.name, l);
+        if waves.len() <= l {
+            waves.resize(l + 1, Vec::new());
+        }
+        waves[l].push(i);
+    }
+    waves
+}

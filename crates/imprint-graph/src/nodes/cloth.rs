@@ -1,0 +1,323 @@
+//! `Cloth`: a mass-spring cloth pushed by distance fields (blended over each frame) and by
+//! bodies read through depth maps; CPU or GPU (fields only).
+
+use crate::node::{
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    load_state, save_state,
+};
+use crate::schema::defaults;
+use crate::value::{FieldData, FieldIn, MeshIn, Value};
+use imprint_core::DistanceField;
+use imprint_gpu::GpuContext;
+use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
+use imprint_stages::cloth::{Body, ClothParams, ClothSim};
+use imprint_stages::drape::{DepthBody, DepthBodyState};
+use serde::{Deserialize, Serialize};
+use std::any::Any;
+use std::sync::Arc;
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClothNode {
+    /// DistanceField nodes the cloth collides with, applied in this order each substep.
+    #[serde(default)]
+    pub colliders: Vec<String>,
+    /// Bodies the cloth collides with through depth maps (T's draping test every substep,
+    /// `imprint_stages::drape::collider`), applied after `colliders` each substep. A cloth
+    /// with depth colliders runs on the CPU.
+    #[serde(default)]
+    pub depth_colliders: Vec<DepthColliderNode>,
+    /// Shape, material, pins, contact, substeps: `imprint_stages::cloth::ClothParams`.
+    pub params: ClothParams,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "defaults::yes")]
+    pub enabled: bool,
+}
+
+/// A body read through depth maps by a cloth.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthColliderNode {
+    /// The Mesh node of the body (any closed mesh, possibly deforming).
+    pub body: String,
+    /// Views and map resolution: `imprint_stages::drape::DepthColliderParams`.
+    #[serde(default)]
+    pub params: imprint_stages::drape::DepthColliderParams,
+}
+
+impl Node for ClothNode {
+    fn kind(&self) -> &'static str {
+        "Cloth"
+    }
+    fn inputs(&self) -> Vec<Port<'_>> {
+        let fields = self
+            .colliders
+            .iter()
+            .map(|f| Port::new("colliders", f, PortType::DistanceField));
+        let bodies = self
+            .depth_colliders
+            .iter()
+            .map(|d| Port::new("depth_colliders", &d.body, PortType::Mesh));
+        fields.chain(bodies).collect()
+    }
+    fn output(&self) -> Option<PortType> {
+        Some(PortType::Mesh)
+    }
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn trigger(&self) -> Trigger {
+        Trigger::EveryFrame
+    }
+    fn backend(&self) -> Option<Backend> {
+        self.backend
+    }
+    fn has_gpu_path(&self) -> bool {
+        // The GPU cloth reads distance fields only.
+        self.depth_colliders.is_empty()
+    }
+    fn track(&self) -> Option<Track> {
+        Some(Track::Vertices)
+    }
+    fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
+        self.params.validate().map_err(|e| ctx.fail("params", e))?;
+        for d in &self.depth_colliders {
+            d.params
+                .validate()
+                .map_err(|e| ctx.fail("depth_colliders", e))?;
+        }
+        if !self.depth_colliders.is_empty() && self.backend == Some(Backend::Gpu) {
+            return Err(ctx.fail(
+                "backend",
+                "the GPU cloth reads distance-field colliders only; a cloth with \
+                 depth_colliders runs on the CPU (set backend: Cpu, or leave it out)",
+            ));
+        }
+        Ok(())
+    }
+    fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>> {
+        let name = ctx.name().to_string();
+        let sim = ClothSim::new(&self.params, ctx.check.base_dir)
+            .map_err(|e| imprint_core::Error::Invalid(format!("node '{name}': {e}")))?
+            .with_name(name.clone());
+        if let Some(w) = sim
+            .stability()
+            .warning(self.params.substeps, 1.0 / ctx.check.fps)
+        {
+            ctx.warn(w);
+        }
+        let gpu = self.gpu_cloth(ctx, &sim)?;
+        let mut depth = Vec::with_capacity(self.depth_colliders.len());
+        for d in &self.depth_colliders {
+            let swept = ctx.swept.get(&d.body).copied();
+            let eps = self.params.collision.epsilon;
+            let body = DepthBody::new(d.params.clone(), eps, swept);
+            depth.push((ctx.mesh_in(&d.body), body));
+        }
+        Ok(Box::new(ClothStage {
+            colliders: self.colliders.iter().map(|c| ctx.field_in(c)).collect(),
+            sim: Box::new(sim),
+            previous: Vec::new(),
+            gpu,
+            depth,
+        }))
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+impl ClothNode {
+    /// The GPU cloth, when the node runs there (`Auto` falls back to the CPU when the GPU
+    /// cannot take this cloth).
+    fn gpu_cloth(&self, ctx: &mut BuildCtx<'_>, sim: &ClothSim) -> crate::Result<Option<GpuPath>> {
+        if !self.depth_colliders.is_empty() {
+            if ctx.want == Backend::Gpu || (ctx.want == Backend::Auto && ctx.gpu.is_some()) {
+                ctx.warn(
+                    "runs on the CPU: the GPU cloth reads distance-field colliders only, and \
+                     it has depth_colliders"
+                        .into(),
+                );
+            }
+            return Ok(None);
+        }
+        let Some(gpu) = ctx.choose_gpu()? else {
+            return Ok(None);
+        };
+        match GpuCloth::new(gpu, sim) {
+            Ok(g) => Ok(Some(GpuPath {
+                gpu,
+                cloth: Box::new(g.with_name(ctx.name().to_string())),
+                previous: Vec::new(),
+            })),
+            Err(e) if ctx.want == Backend::Auto => {
+                ctx.warn(format!("runs on the CPU: {e}"));
+                Ok(None)
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+}
+
+/// The GPU cloth and the colliders it saw last frame (uploaded once per field: a static
+/// field is not uploaded again).
+struct GpuPath {
+    gpu: &'static GpuContext,
+    cloth: Box<GpuCloth>,
+    previous: Vec<(Arc<DistanceField>, Arc<GpuCollider>)>,
+}
+
+struct ClothStage {
+    colliders: Vec<FieldIn>,
+    /// The simulation (on the GPU path, a mirror of the GPU's state once per frame).
+    sim: Box<ClothSim>,
+    /// The colliders' fields at the end of the previous frame: the start of this one.
+    previous: Vec<Arc<DistanceField>>,
+    gpu: Option<GpuPath>,
+    /// Bodies read through depth maps (CPU cloth only).
+    depth: Vec<(MeshIn, DepthBody)>,
+}
+
+/// A cloth collider over one frame: start field (if blending), end field, span of the blend.
+type BodyFields = (Option<Arc<DistanceField>>, Arc<DistanceField>, (f32, f32));
+
+impl Stage for ClothStage {
+    fn run(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<Step> {
+        let m = match &mut self.gpu {
+            Some(g) => step_gpu(g, &mut self.sim, &self.colliders, ctx)?,
+            None => self.step_cpu(ctx)?,
+        };
+        ctx.push_per_frame(m);
+        ctx.metric("particles", self.sim.len());
+        Ok(Step::computed(Value::Mesh(Arc::new(self.sim.to_mesh()))))
+    }
+
+    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+        let previous: Vec<&Arc<DistanceField>> = match &self.gpu {
+            Some(g) => g.previous.iter().map(|(f, _)| f).collect(),
+            None => self.previous.iter().collect(),
+        };
+        let depth: Vec<DepthBodyState> = self.depth.iter().map(|(_, d)| d.state()).collect();
+        save_state(&(&*self.sim, previous, depth))
+    }
+
+    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
+        type Saved = (ClothSim, Vec<Arc<DistanceField>>, Vec<DepthBodyState>);
+        let (sim, previous, depth): Saved = load_state(bytes)?;
+        *self.sim = sim;
+        for ((_, body), s) in self.depth.iter_mut().zip(depth) {
+            body.set_state(s)?;
+        }
+        match &mut self.gpu {
+            Some(g) => {
+                g.cloth = Box::new(GpuCloth::new(g.gpu, &self.sim)?);
+                g.previous = Vec::with_capacity(previous.len());
+                for f in previous {
+                    let up = Arc::new(GpuCollider::from_field(g.gpu, &f)?);
+                    g.previous.push((f, up));
+                }
+            }
+            None => self.previous = previous,
+        }
+        Ok(())
+    }
+
+    fn on_gpu(&self) -> bool {
+        self.gpu.is_some()
+    }
+}
+
+impl ClothStage {
+    /// One frame on the CPU: per collider, the two fields the frame blends between and its
+    /// span of the blend (last frame's and this frame's field, or an interpolated node's two
+    /// builds around the frame); then the depth-map bodies.
+    fn step_cpu(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<serde_json::Value> {
+        let mut ends: Vec<BodyFields> = Vec::with_capacity(self.colliders.len());
+        for (k, c) in self.colliders.iter().enumerate() {
+            let v = ctx.values.field(c)?;
+            ends.push(match &v.data {
+                FieldData::Blend {
+                    a,
+                    b,
+                    a_key,
+                    every,
+                    weight,
+                } => {
+                    let s0 = if ctx.frame == ctx.first_frame {
+                        *weight
+                    } else {
+                        (ctx.frame as i64 - 1 - a_key) as f32 / *every as f32
+                    };
+                    (Some(a.clone()), b.clone(), (s0, *weight))
+                }
+                _ => (self.previous.get(k).cloned(), v.cpu(ctx.gpu)?, (0.0, 1.0)),
+            });
+        }
+        let bodies: Vec<Body> = ends
+            .iter()
+            .map(|(start, end, span)| Body {
+                start: start.as_deref(),
+                end,
+                span: *span,
+            })
+            .collect();
+        let mut poses = Vec::with_capacity(self.depth.len());
+        for (mesh, body) in &mut self.depth {
+            poses.push(body.poses(ctx.values.mesh(mesh)?)?);
+        }
+        let depth_colliders: Vec<_> = self
+            .depth
+            .iter()
+            .zip(&poses)
+            .filter_map(|((_, body), (start, end))| {
+                Some(body.camera()?.collider(start.as_deref(), end))
+            })
+            .collect();
+        let dt = 1.0 / ctx.fps;
+        let m = self
+            .sim
+            .step_frame_between(&bodies, &depth_colliders, ctx.frame, dt)?;
+        self.previous = ends.into_iter().map(|(_, e, _)| e).collect();
+        Ok(serde_json::to_value(m).expect("plain data"))
+    }
+}
+
+/// One frame on the GPU. Interpolated colliders arrive as fields blended at the frame's end
+/// (and last frame's end is this frame's start). The CPU simulator mirrors the GPU's state
+/// once per frame: the same metrics as the CPU path, and the mesh from one read-back.
+fn step_gpu(
+    g: &mut GpuPath,
+    sim: &mut ClothSim,
+    colliders: &[FieldIn],
+    ctx: &mut FrameCtx<'_>,
+) -> imprint_core::Result<serde_json::Value> {
+    let end = colliders
+        .iter()
+        .map(|c| ctx.values.field(c)?.cpu(ctx.gpu))
+        .collect::<imprint_core::Result<Vec<_>>>()?;
+    let mut now = Vec::with_capacity(end.len());
+    for (k, f) in end.iter().enumerate() {
+        let same = g.previous.get(k).filter(|(cf, _)| Arc::ptr_eq(cf, f));
+        let up = match same {
+            Some((_, u)) => u.clone(),
+            None => Arc::new(GpuCollider::from_field(g.gpu, f)?),
+        };
+        now.push((f.clone(), up));
+    }
+    let start: Vec<&GpuCollider> = g.previous.iter().map(|(_, u)| &**u).collect();
+    let end_refs: Vec<&GpuCollider> = now.iter().map(|(_, u)| &**u).collect();
+    let gm = g
+        .cloth
+        .step_frame(g.gpu, &start, &end_refs, ctx.frame, 1.0 / ctx.fps)?;
+    g.previous = now;
+    let fields: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
+    let m = sim.adopt_gpu_frame(
+        g.cloth.read_state(g.gpu)?,
+        g.cloth.read_side(g.gpu)?,
+        &fields,
+        &gm,
+    )?;
+    Ok(serde_json::to_value(m).expect("plain data"))
+}

@@ -1,0 +1,203 @@
+//! `Voxelize`: a mesh's surface cells and their boundary points on a fixed grid.
+
+use crate::node::{
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger,
+};
+use crate::schedule::Schedule;
+use crate::schema::defaults;
+use crate::value::{BoundaryValue, MeshIn, Value};
+use imprint_core::{BoundaryVariant, Error, GridSpec};
+use imprint_gpu::GpuContext;
+use imprint_stages::voxel::cpu::Voxelizer;
+use serde::{Deserialize, Serialize};
+use std::any::Any;
+use std::sync::Arc;
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct VoxelizeNode {
+    /// The Mesh node to voxelise.
+    pub mesh: String,
+    pub grid: GridChoice,
+    /// `Closest` (sub-voxel, default) or `Centre` (H's voxel centres).
+    #[serde(default)]
+    pub variant: BoundaryVariant,
+    #[serde(default)]
+    pub backend: Option<Backend>,
+    /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
+    /// frame); consumers reuse the last result in between.
+    #[serde(default = "defaults::one")]
+    pub every: u32,
+    #[serde(default)]
+    pub offset: u32,
+    /// `false` switches this node and everything that reads it off.
+    #[serde(default = "defaults::yes")]
+    pub enabled: bool,
+}
+
+/// The grid a Voxelize node works on.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+pub enum GridChoice {
+    /// Cubic cells, `resolution` along the longest side of the box the mesh sweeps over the run,
+    /// grown by `padding` (a fraction of that side) on every side. The grid stays fixed.
+    Fit {
+        resolution: u32,
+        #[serde(default = "defaults::padding")]
+        padding: f32,
+    },
+    /// An explicit grid: `origin` is the centre of cell (0, 0, 0).
+    Explicit {
+        origin: (f32, f32, f32),
+        cell: f32,
+        dims: (u32, u32, u32),
+    },
+}
+
+impl VoxelizeNode {
+    /// The grid, for node `name` (a fitted grid takes its mesh's swept box).
+    pub fn grid_spec(&self, name: &str, ctx: &mut BuildCtx<'_>) -> crate::Result<GridSpec> {
+        Ok(match self.grid {
+            GridChoice::Fit {
+                resolution,
+                padding,
+            } => {
+                let b = ctx.swept_bounds(&self.mesh)?.ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "node '{name}': Fit needs the swept box of a Mesh node, and '{}' is \
+                         computed while running; give an Explicit grid",
+                        self.mesh
+                    ))
+                })?;
+                GridSpec::fit(&b, resolution, padding)?
+            }
+            GridChoice::Explicit { origin, cell, dims } => GridSpec::new(
+                glam::Vec3::new(origin.0, origin.1, origin.2),
+                cell,
+                glam::UVec3::new(dims.0, dims.1, dims.2),
+            )?,
+        })
+    }
+}
+
+impl Node for VoxelizeNode {
+    fn kind(&self) -> &'static str {
+        "Voxelize"
+    }
+    fn inputs(&self) -> Vec<Port<'_>> {
+        vec![Port::new("mesh", &self.mesh, PortType::Mesh)]
+    }
+    fn output(&self) -> Option<PortType> {
+        Some(PortType::Boundary)
+    }
+    fn enabled(&self) -> bool {
+        self.enabled
+    }
+    fn trigger(&self) -> Trigger {
+        Trigger::Inputs
+    }
+    fn schedule(&self) -> Schedule {
+        Schedule::every(self.every, self.offset)
+    }
+    fn backend(&self) -> Option<Backend> {
+        self.backend
+    }
+    fn has_gpu_path(&self) -> bool {
+        true
+    }
+    fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
+        match &self.grid {
+            GridChoice::Fit {
+                resolution,
+                padding,
+            } => {
+                if *resolution == 0 {
+                    return Err(ctx.fail("grid", "grid resolution must be at least 1, got 0"));
+                }
+                if *resolution > imprint_core::grid::MAX_AXIS_CELLS {
+                    let r = *resolution as u64;
+                    return Err(ctx.fail(
+                        "grid",
+                        format!(
+                            "a {r}^3 grid would need {} (resolution at most {})",
+                            imprint_core::error::human_bytes(r * r * r * 17),
+                            imprint_core::grid::MAX_AXIS_CELLS
+                        ),
+                    ));
+                }
+                if !(padding.is_finite() && *padding >= 0.0) {
+                    return Err(ctx.fail(
+                        "grid",
+                        format!("grid padding must be finite and >= 0, got {padding}"),
+                    ));
+                }
+            }
+            GridChoice::Explicit { origin, cell, dims } => {
+                let o = glam::Vec3::new(origin.0, origin.1, origin.2);
+                let d = glam::UVec3::new(dims.0, dims.1, dims.2);
+                GridSpec::new(o, *cell, d).map_err(|e| ctx.fail("grid", e))?;
+            }
+        }
+        Ok(())
+    }
+    fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>> {
+        let name = ctx.name().to_string();
+        let spec = self.grid_spec(&name, ctx)?;
+        // Scratch, field and the writers' copies: refuse now rather than fail later.
+        spec.check_memory(
+            &format!("node '{name}': voxelisation and distance field"),
+            9 + 8 + 16,
+        )?;
+        let gpu = ctx.choose_gpu()?;
+        Ok(Box::new(VoxelizeStage {
+            input: ctx.mesh_in(&self.mesh),
+            spec,
+            variant: self.variant,
+            path: match gpu {
+                Some(gpu) => VoxelPath::Gpu(gpu),
+                None => VoxelPath::Cpu(Box::new(Voxelizer::new(spec)?)),
+            },
+        }))
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+struct VoxelizeStage {
+    input: MeshIn,
+    spec: GridSpec,
+    variant: BoundaryVariant,
+    path: VoxelPath,
+}
+
+enum VoxelPath {
+    Gpu(&'static GpuContext),
+    /// The CPU voxeliser keeps its scratch between frames.
+    Cpu(Box<Voxelizer>),
+}
+
+impl Stage for VoxelizeStage {
+    fn run(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<Step> {
+        if !(ctx.first || (ctx.key && ctx.changed)) {
+            return Ok(Step::idle());
+        }
+        let mesh = ctx.values.mesh(&self.input)?;
+        let b = match &mut self.path {
+            VoxelPath::Gpu(gpu) => {
+                let b =
+                    imprint_stages::voxel::gpu::voxelize_gpu(gpu, mesh, &self.spec, self.variant)?;
+                gpu.wait()?;
+                BoundaryValue::Gpu(Arc::new(b))
+            }
+            VoxelPath::Cpu(vox) => {
+                let b = vox.run(mesh, self.variant)?;
+                ctx.metric("boundary_points", b.len());
+                BoundaryValue::Cpu(Arc::new(b))
+            }
+        };
+        Ok(Step::computed(Value::Boundary(b)))
+    }
+    fn on_gpu(&self) -> bool {
+        matches!(self.path, VoxelPath::Gpu(_))
+    }
+}

@@ -1,0 +1,330 @@
+//! The values that flow along edges, kept by producer name and by type: a node reads its
+//! inputs through typed handles made when its stage was built (after the plan checked every
+//! edge's type), so a read never re-checks a type.
+//!
+//! A value stays where its producer made it: a GPU field is read back to the CPU only when a
+//! CPU consumer asks for it, once per published value.
+
+use imprint_core::{Boundary, DistanceField, Error, HeightField, Mesh, Result};
+use imprint_gpu::GpuContext;
+use imprint_stages::sdf::gpu::GpuField;
+use imprint_stages::voxel::gpu::GpuBoundary;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::sync::{Arc, OnceLock};
+
+/// A value a node publishes.
+#[derive(Clone)]
+pub enum Value {
+    Mesh(Arc<Mesh>),
+    Boundary(BoundaryValue),
+    Field(Arc<FieldValue>),
+    Heights(Arc<HeightField>),
+}
+
+#[derive(Clone)]
+pub enum BoundaryValue {
+    Cpu(Arc<Boundary>),
+    Gpu(Arc<GpuBoundary>),
+}
+
+impl BoundaryValue {
+    /// The boundary on the CPU (read back if it is on the GPU).
+    pub fn cpu(&self, gpu: Option<&GpuContext>) -> Result<Arc<Boundary>> {
+        match self {
+            BoundaryValue::Cpu(b) => Ok(b.clone()),
+            BoundaryValue::Gpu(g) => Ok(Arc::new(g.to_cpu(need_gpu(gpu)?)?)),
+        }
+    }
+}
+
+/// A distance field as its producer made it.
+pub enum FieldData {
+    Cpu(Arc<DistanceField>),
+    Gpu(Arc<GpuField>),
+    /// The blend of the builds at keyframes `a_key` and `a_key + every`, with `weight` on the
+    /// second (an interpolated field node, H eq. 13-14).
+    Blend {
+        a: Arc<DistanceField>,
+        b: Arc<DistanceField>,
+        a_key: i64,
+        every: u32,
+        weight: f32,
+    },
+}
+
+/// A distance field and, once a CPU consumer asked, its CPU copy (a read-back or a blend).
+pub struct FieldValue {
+    pub data: FieldData,
+    cpu: OnceLock<Arc<DistanceField>>,
+}
+
+impl FieldValue {
+    pub fn new(data: FieldData) -> Arc<Self> {
+        Arc::new(FieldValue {
+            data,
+            cpu: OnceLock::new(),
+        })
+    }
+
+    /// The CPU field itself when nobody else holds this value or its field (its buffers can
+    /// then be reused), else the value back.
+    pub fn try_take(this: Arc<Self>) -> std::result::Result<DistanceField, Arc<Self>> {
+        let unshared = Arc::strong_count(&this) == 1
+            && matches!(&this.data, FieldData::Cpu(f) if Arc::strong_count(f) == 1);
+        if !unshared {
+            return Err(this);
+        }
+        match Arc::try_unwrap(this) {
+            Ok(FieldValue {
+                data: FieldData::Cpu(f),
+                ..
+            }) => Arc::try_unwrap(f).map_err(|f| FieldValue::new(FieldData::Cpu(f))),
+            Ok(v) => Err(Arc::new(v)),
+            Err(v) => Err(v),
+        }
+    }
+
+    /// The field on the CPU: computed once per value (a GPU read-back or a blend).
+    pub fn cpu(&self, gpu: Option<&GpuContext>) -> Result<Arc<DistanceField>> {
+        if let FieldData::Cpu(f) = &self.data {
+            // Not cached: the producer reuses an unshared field's buffers.
+            return Ok(f.clone());
+        }
+        if let Some(f) = self.cpu.get() {
+            return Ok(f.clone());
+        }
+        let f = match &self.data {
+            FieldData::Cpu(f) => f.clone(),
+            FieldData::Gpu(g) => Arc::new(g.to_cpu(need_gpu(gpu)?)?),
+            FieldData::Blend { a, b, weight, .. } => {
+                Arc::new(DistanceField::blend(a, b, *weight)?)
+            }
+        };
+        Ok(self.cpu.get_or_init(|| f).clone())
+    }
+}
+
+fn need_gpu(gpu: Option<&GpuContext>) -> Result<&GpuContext> {
+    gpu.ok_or_else(|| Error::Run("a GPU value without a GPU context".into()))
+}
+
+macro_rules! handle {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(Clone, Debug)]
+        pub struct $name(String);
+        impl $name {
+            pub fn new(node: &str) -> Self {
+                $name(node.to_string())
+            }
+            pub fn node(&self) -> &str {
+                &self.0
+            }
+        }
+    };
+}
+
+handle!(
+    /// A Mesh input.
+    MeshIn
+);
+handle!(
+    /// A Boundary input.
+    BoundaryIn
+);
+handle!(
+    /// A DistanceField input.
+    FieldIn
+);
+handle!(
+    /// A HeightField input.
+    HeightsIn
+);
+
+/// Every node's current value, by type and name.
+#[derive(Clone, Default)]
+pub struct Values {
+    meshes: BTreeMap<String, Arc<Mesh>>,
+    boundaries: BTreeMap<String, BoundaryValue>,
+    fields: BTreeMap<String, Arc<FieldValue>>,
+    heights: BTreeMap<String, Arc<HeightField>>,
+}
+
+/// A producer read before it produced: the executor's order is wrong (a bug, not bad input).
+fn missing(node: &str) -> Error {
+    Error::Run(format!(
+        "internal: node '{node}' was read before it produced a value"
+    ))
+}
+
+impl Values {
+    pub fn mesh(&self, h: &MeshIn) -> Result<&Arc<Mesh>> {
+        self.meshes.get(h.node()).ok_or_else(|| missing(h.node()))
+    }
+    pub fn meshes(&self, hs: &[MeshIn]) -> Result<Vec<Arc<Mesh>>> {
+        hs.iter().map(|h| self.mesh(h).cloned()).collect()
+    }
+    pub fn boundary(&self, h: &BoundaryIn) -> Result<&BoundaryValue> {
+        self.boundaries.get(h.node()).ok_or_else(|| missing(h.node()))
+    }
+    pub fn field(&self, h: &FieldIn) -> Result<&Arc<FieldValue>> {
+        self.fields.get(h.node()).ok_or_else(|| missing(h.node()))
+    }
+    pub fn heights(&self, h: &HeightsIn) -> Result<&Arc<HeightField>> {
+        self.heights.get(h.node()).ok_or_else(|| missing(h.node()))
+    }
+
+    /// Whether `node` has published a value.
+    pub fn has(&self, node: &str) -> bool {
+        self.get(node).is_some()
+    }
+
+    /// `node`'s value, whatever its type.
+    pub fn get(&self, node: &str) -> Option<Value> {
+        if let Some(m) = self.meshes.get(node) {
+            return Some(Value::Mesh(m.clone()));
+        }
+        if let Some(b) = self.boundaries.get(node) {
+            return Some(Value::Boundary(b.clone()));
+        }
+        if let Some(f) = self.fields.get(node) {
+            return Some(Value::Field(f.clone()));
+        }
+        self.heights.get(node).map(|h| Value::Heights(h.clone()))
+    }
+
+    pub fn set(&mut self, node: &str, value: Value) {
+        let n = node.to_string();
+        match value {
+            Value::Mesh(m) => self.meshes.insert(n, m).map(drop),
+            Value::Boundary(b) => self.boundaries.insert(n, b).map(drop),
+            Value::Field(f) => self.fields.insert(n, f).map(drop),
+            Value::Heights(h) => self.heights.insert(n, h).map(drop),
+        };
+    }
+
+    /// Takes `node`'s value out (to lend it to the node for a frame).
+    pub fn take(&mut self, node: &str) -> Option<Value> {
+        if let Some(m) = self.meshes.remove(node) {
+            return Some(Value::Mesh(m));
+        }
+        if let Some(b) = self.boundaries.remove(node) {
+            return Some(Value::Boundary(b));
+        }
+        if let Some(f) = self.fields.remove(node) {
+            return Some(Value::Field(f));
+        }
+        self.heights.remove(node).map(Value::Heights)
+    }
+
+    /// Forgets `node`'s value (it is rebuilt).
+    pub fn remove(&mut self, node: &str) {
+        self.meshes.remove(node);
+        self.boundaries.remove(node);
+        self.fields.remove(node);
+        self.heights.remove(node);
+    }
+
+    /// Every value on the CPU, for a checkpoint.
+    pub fn snapshot(&self, gpu: Option<&GpuContext>) -> Result<ValuesSnapshot> {
+        let mut fields = BTreeMap::new();
+        for (n, f) in &self.fields {
+            let snap = match &f.data {
+                FieldData::Blend {
+                    a,
+                    b,
+                    a_key,
+                    every,
+                    weight,
+                } => FieldSnapshot::Blend {
+                    a: (**a).clone(),
+                    b: (**b).clone(),
+                    a_key: *a_key,
+                    every: *every,
+                    weight: *weight,
+                },
+                _ => FieldSnapshot::One((*f.cpu(gpu)?).clone()),
+            };
+            fields.insert(n.clone(), snap);
+        }
+        let mut boundaries = BTreeMap::new();
+        for (n, b) in &self.boundaries {
+            boundaries.insert(n.clone(), (*b.cpu(gpu)?).clone());
+        }
+        Ok(ValuesSnapshot {
+            meshes: self
+                .meshes
+                .iter()
+                .map(|(n, m)| (n.clone(), (**m).clone()))
+                .collect(),
+            boundaries,
+            fields,
+            heights: self
+                .heights
+                .iter()
+                .map(|(n, h)| (n.clone(), (**h).clone()))
+                .collect(),
+        })
+    }
+
+    /// The values a snapshot holds (all on the CPU; GPU consumers upload them).
+    pub fn from_snapshot(s: ValuesSnapshot) -> Self {
+        Values {
+            meshes: s.meshes.into_iter().map(|(n, m)| (n, Arc::new(m))).collect(),
+            boundaries: s
+                .boundaries
+                .into_iter()
+                .map(|(n, b)| (n, BoundaryValue::Cpu(Arc::new(b))))
+                .collect(),
+            fields: s
+                .fields
+                .into_iter()
+                .map(|(n, f)| (n, FieldValue::new(f.into_data())))
+                .collect(),
+            heights: s.heights.into_iter().map(|(n, h)| (n, Arc::new(h))).collect(),
+        }
+    }
+}
+
+/// [`Values`] as a checkpoint stores them.
+#[derive(Clone, Serialize, Deserialize)]
+pub struct ValuesSnapshot {
+    meshes: BTreeMap<String, Mesh>,
+    boundaries: BTreeMap<String, Boundary>,
+    fields: BTreeMap<String, FieldSnapshot>,
+    heights: BTreeMap<String, HeightField>,
+}
+
+#[derive(Clone, Serialize, Deserialize)]
+enum FieldSnapshot {
+    One(DistanceField),
+    Blend {
+        a: DistanceField,
+        b: DistanceField,
+        a_key: i64,
+        every: u32,
+        weight: f32,
+    },
+}
+
+impl FieldSnapshot {
+    fn into_data(self) -> FieldData {
+        match self {
+            FieldSnapshot::One(f) => FieldData::Cpu(Arc::new(f)),
+            FieldSnapshot::Blend {
+                a,
+                b,
+                a_key,
+                every,
+                weight,
+            } => FieldData::Blend {
+                a: Arc::new(a),
+                b: Arc::new(b),
+                a_key,
+                every,
+                weight,
+            },
+        }
+    }
+}
