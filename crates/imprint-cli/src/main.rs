@@ -401,7 +401,10 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
         eprintln!("warning: {w}");
     }
     if let Some(c) = run.executor().report().resumed_at {
-        eprintln!("resuming at frame {c} from {}", out.join("checkpoint.bin").display());
+        eprintln!(
+            "resuming at frame {c} from {}",
+            out.join("checkpoint.bin").display()
+        );
     }
     let bar = ProgressBar::new(0);
     if std::io::stderr().is_terminal() {

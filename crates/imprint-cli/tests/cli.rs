@@ -960,7 +960,8 @@ fn drape_node_pushes_a_garment_out_of_the_body() {
 }
 
 /// A stage that fails while running (snow piling past what a ground cell holds) stops the run
-/// with exit code 1, naming the node and frame and what to change; nothing is written.
+/// with exit code 1, naming the node and frame and what to change; no frame is written, and
+/// report.json says which frames were done (none) and why the run stopped.
 #[test]
 fn a_failing_stage_names_node_and_frame_and_exits_1() {
     let nodes = r#"        "box": Mesh(primitive: Box(size: (0.2, 0.2, 0.2))),
@@ -979,7 +980,12 @@ fn a_failing_stage_names_node_and_frame_and_exits_1() {
         "{err}"
     );
     assert!(!c.dir.path().join("o/h/s_0000.npy").exists());
-    assert!(!c.dir.path().join("o/report.json").exists());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(c.dir.path().join("o/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["frames"], serde_json::json!([]), "{report}");
+    let why = report["error"].as_str().unwrap_or_default();
+    assert!(why.contains("node 's', frame 0"), "{why}");
 }
 
 /// One pipeline drops two cloths on the same sphere, one colliding through its distance field

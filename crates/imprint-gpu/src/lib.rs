@@ -8,8 +8,10 @@
 //!   every stage;
 //! - [`GpuTimer`]: per-pass GPU timestamps where the adapter has them, wall clock otherwise;
 //! - [`test_context`]: what every GPU test calls, so a machine without a GPU skips politely;
-//! - [`raster`]: GPU depth maps ([`raster::GpuRasterizer`]) and the pieces every raster pass
-//!   shares (camera uniform, render shader modules, growing buffers, texture readback).
+//! - [`raster`]: GPU depth maps ([`raster::GpuRasterizer`], read back or left on the device)
+//!   and the pieces every raster pass shares (camera uniform, render shader modules, growing
+//!   buffers, texture readback);
+//! - [`transfer`]: per-thread counts of the bytes every upload and read-back moves.
 //!
 //! This crate knows no stage: stages (in `imprint-stages`) own their shaders and passes.
 

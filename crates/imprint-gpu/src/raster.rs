@@ -1,5 +1,6 @@
 //! GPU rasterisation: depth maps ([`GpuRasterizer`], the twin of
-//! `imprint_core::raster::rasterize_depth_with`), and what every raster pass shares: the camera
+//! `imprint_core::raster::rasterize_depth_with`, read back as a `DepthMap` or left on the
+//! device for a consumer there as a [`GpuDepthMap`]), and what every raster pass shares: the camera
 //! uniform ([`GpuView`], one projection convention for all of them), render shader modules
 //! ([`shader_module`]), error-checked creation ([`checked`]), vertex and index buffers that
 //! grow and are reused ([`GrowingBuffer`]), and texture readback ([`TextureReadback`]).

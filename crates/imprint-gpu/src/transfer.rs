@@ -123,7 +123,8 @@ mod tests {
         assert_eq!(snapshot().since(&t0).uploaded_bytes, 400);
         let _u = ctx.uniform_buffer("counted uniform", &[1u32, 2, 3, 4]);
         assert_eq!(snapshot().since(&t0).uploaded_bytes, 416);
-        ctx.queue.write_buffer(&b, 0, bytemuck::cast_slice(&data[..10]));
+        ctx.queue
+            .write_buffer(&b, 0, bytemuck::cast_slice(&data[..10]));
         assert_eq!(snapshot().since(&t0).uploaded_bytes, 456);
         let z = ctx.zeroed_buffer("not counted", 1 << 16).unwrap();
         assert_eq!(snapshot().since(&t0).uploaded_bytes, 456);
@@ -132,7 +133,10 @@ mod tests {
         assert_eq!(snapshot().since(&t0).read_back_bytes, 400);
         let _: Vec<u8> = ctx.read_buffer(&z).unwrap();
         let d = snapshot().since(&t0);
-        assert_eq!((d.read_back_bytes, d.field_read_backs), (400 + (1 << 16), 0));
+        assert_eq!(
+            (d.read_back_bytes, d.field_read_backs),
+            (400 + (1 << 16), 0)
+        );
     }
 
     /// The counters see every transfer only if nothing goes around the helpers: no source
@@ -152,7 +156,11 @@ mod tests {
             "get_mapped_range_mut",
         ];
         let mut bad = Vec::new();
-        let mut stack = vec![root.join("crates"), root.join("tests"), root.join("benches")];
+        let mut stack = vec![
+            root.join("crates"),
+            root.join("tests"),
+            root.join("benches"),
+        ];
         while let Some(dir) = stack.pop() {
             let Ok(entries) = std::fs::read_dir(&dir) else {
                 continue;
@@ -165,7 +173,8 @@ mod tests {
                     }
                     continue;
                 }
-                if p.extension().is_none_or(|x| x != "rs") || p.ends_with("imprint-gpu/src/context.rs")
+                if p.extension().is_none_or(|x| x != "rs")
+                    || p.ends_with("imprint-gpu/src/context.rs")
                     || p.ends_with("imprint-gpu/src/transfer.rs")
                 {
                     continue;

@@ -155,7 +155,9 @@ fn stopped(ex: &Executor, opts: &RunOptions, e: crate::Error) -> crate::Error {
     report.error = Some(e.to_string());
     let _ = write_report(&report, &opts.out);
     if opts.checkpoint_every > 0 && matches!(&e, crate::Error::Core(Error::Interrupted { .. })) {
-        let _ = ex.checkpoint().and_then(|c| Ok(c.write(&checkpoint_path(&opts.out))?));
+        let _ = ex
+            .checkpoint()
+            .and_then(|c| Ok(c.write(&checkpoint_path(&opts.out))?));
     }
     e
 }

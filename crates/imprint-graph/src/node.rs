@@ -132,12 +132,13 @@ pub trait Stage: Send {
     fn finish(&mut self, _report: &mut NodeReport) -> imprint_core::Result<usize> {
         Ok(0)
     }
-    /// The state it carries between frames, for a checkpoint (empty: none).
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    /// The state it carries between frames, for a checkpoint (empty: none). `values`: every
+    /// node's current value (a stage may note which of its own references are the same).
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
         Ok(Vec::new())
     }
-    /// Takes back what [`Stage::save`] gave.
-    fn load(&mut self, _bytes: &[u8]) -> imprint_core::Result<()> {
+    /// Takes back what [`Stage::save`] gave; `values` are already restored.
+    fn load(&mut self, _bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
         Ok(())
     }
 }
@@ -228,11 +229,7 @@ impl CheckCtx<'_> {
             .source
             .error(
                 self.source.field_span(self.name, field),
-                format!(
-                    "node '{}': {what} not found: {}",
-                    self.name,
-                    full.display()
-                ),
+                format!("node '{}': {what} not found: {}", self.name, full.display()),
                 "missing file",
                 Some("paths are relative to the pipeline file's folder".into()),
             )

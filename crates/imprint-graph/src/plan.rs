@@ -1,8 +1,8 @@
 //! From text to a checked plan: parse, check every edge and value, find assets, prune.
 
 use crate::diagnostics::{Source, ron_error};
-use crate::overrides::apply_override;
 use crate::node::CheckCtx;
+use crate::overrides::apply_override;
 use crate::schema::{PipelineFile, PortType};
 use crate::{Error, Result};
 use petgraph::algo::{kosaraju_scc, toposort};

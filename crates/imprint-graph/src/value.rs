@@ -97,9 +97,7 @@ impl FieldValue {
         let f = match &self.data {
             FieldData::Cpu(f) => f.clone(),
             FieldData::Gpu(g) => Arc::new(g.to_cpu(need_gpu(gpu)?)?),
-            FieldData::Blend { a, b, weight, .. } => {
-                Arc::new(DistanceField::blend(a, b, *weight)?)
-            }
+            FieldData::Blend { a, b, weight, .. } => Arc::new(DistanceField::blend(a, b, *weight)?),
         };
         Ok(self.cpu.get_or_init(|| f).clone())
     }
@@ -166,7 +164,9 @@ impl Values {
         hs.iter().map(|h| self.mesh(h).cloned()).collect()
     }
     pub fn boundary(&self, h: &BoundaryIn) -> Result<&BoundaryValue> {
-        self.boundaries.get(h.node()).ok_or_else(|| missing(h.node()))
+        self.boundaries
+            .get(h.node())
+            .ok_or_else(|| missing(h.node()))
     }
     pub fn field(&self, h: &FieldIn) -> Result<&Arc<FieldValue>> {
         self.fields.get(h.node()).ok_or_else(|| missing(h.node()))
@@ -271,7 +271,11 @@ impl Values {
     /// The values a snapshot holds (all on the CPU; GPU consumers upload them).
     pub fn from_snapshot(s: ValuesSnapshot) -> Self {
         Values {
-            meshes: s.meshes.into_iter().map(|(n, m)| (n, Arc::new(m))).collect(),
+            meshes: s
+                .meshes
+                .into_iter()
+                .map(|(n, m)| (n, Arc::new(m)))
+                .collect(),
             boundaries: s
                 .boundaries
                 .into_iter()
@@ -282,7 +286,11 @@ impl Values {
                 .into_iter()
                 .map(|(n, f)| (n, FieldValue::new(f.into_data())))
                 .collect(),
-            heights: s.heights.into_iter().map(|(n, h)| (n, Arc::new(h))).collect(),
+            heights: s
+                .heights
+                .into_iter()
+                .map(|(n, h)| (n, Arc::new(h)))
+                .collect(),
         }
     }
 }

@@ -98,7 +98,7 @@ impl Executor {
         let mut stages = BTreeMap::new();
         let mut seen = BTreeMap::new();
         for s in &self.slots {
-            stages.insert(s.name.clone(), s.stage.save()?);
+            stages.insert(s.name.clone(), s.stage.save(&self.values)?);
             seen.insert(s.name.clone(), s.seen.clone());
         }
         Ok(Checkpoint {
@@ -119,13 +119,13 @@ impl Executor {
         self.check_fits(c)?;
         let report: Report = serde_json::from_str(&c.report)
             .map_err(|e| Error::Invalid(format!("checkpoint: its report does not read: {e}")))?;
+        self.values = Values::from_snapshot(c.values.clone());
         for s in &mut self.slots {
             let state = c.stages.get(&s.name).ok_or_else(|| missing(&s.name))?;
-            s.stage.load(state)?;
+            s.stage.load(state, &self.values)?;
             s.seen = c.seen.get(&s.name).cloned().flatten();
             s.report = report.nodes.get(&s.name).cloned().unwrap_or_default();
         }
-        self.values = Values::from_snapshot(c.values.clone());
         self.versions = c.versions.clone();
         self.next = c.next;
         let keep = (self.report.adapter.clone(), self.report.threads);

@@ -229,7 +229,9 @@ impl Executor {
                 }
             }
         }
-        summary.nodes.sort_by_key(|(n, ..)| self.plan.order.iter().position(|o| o == n));
+        summary
+            .nodes
+            .sort_by_key(|(n, ..)| self.plan.order.iter().position(|o| o == n));
         self.next += 1;
         summary.ms = start.elapsed().as_secs_f64() * 1e3 - observed_ms;
         self.report.frames.push(frame);

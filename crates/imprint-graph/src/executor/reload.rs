@@ -66,11 +66,20 @@ impl Executor {
     pub fn reload(&mut self, plan: &Plan) -> crate::Result<Vec<String>> {
         let same = self.unchanged_nodes(plan);
         let old_plan = std::mem::replace(&mut self.plan, plan.clone());
-        for (name, _) in old_plan.file.nodes.iter().filter(|(n, _)| !same.contains(*n)) {
+        for (name, _) in old_plan
+            .file
+            .nodes
+            .iter()
+            .filter(|(n, _)| !same.contains(*n))
+        {
             self.swept.remove(name);
         }
         let mut fresh = BTreeMap::new();
-        let to_build: Vec<&String> = plan.order.iter().filter(|n| !self.has_slot(n, &same)).collect();
+        let to_build: Vec<&String> = plan
+            .order
+            .iter()
+            .filter(|n| !self.has_slot(n, &same))
+            .collect();
         for name in to_build {
             match self.build_slot(name) {
                 Ok(slot) => fresh.insert(name.clone(), slot),

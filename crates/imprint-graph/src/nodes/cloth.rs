@@ -2,11 +2,11 @@
 //! bodies read through depth maps; CPU or GPU (fields only).
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
     load_state, save_state,
 };
 use crate::schema::defaults;
-use crate::value::{FieldData, FieldIn, MeshIn, Value};
+use crate::value::{FieldData, FieldIn, MeshIn, Value, Values};
 use imprint_core::DistanceField;
 use imprint_gpu::GpuContext;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
@@ -194,18 +194,36 @@ impl Stage for ClothStage {
         Ok(Step::computed(Value::Mesh(Arc::new(self.sim.to_mesh()))))
     }
 
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    fn save(&self, values: &Values) -> imprint_core::Result<Vec<u8>> {
         let previous: Vec<&Arc<DistanceField>> = match &self.gpu {
             Some(g) => g.previous.iter().map(|(f, _)| f).collect(),
             None => self.previous.iter().collect(),
         };
+        // A field that is still its collider's value is saved as that (the cloth reads a
+        // collider that did not change as static, not as a blend of two equal fields).
+        let mut saved = Vec::with_capacity(previous.len());
+        for (f, c) in previous.into_iter().zip(&self.colliders) {
+            let same = matches!(&values.field(c)?.data, FieldData::Cpu(v) if Arc::ptr_eq(v, f));
+            saved.push(if same { None } else { Some(f) });
+        }
         let depth: Vec<DepthBodyState> = self.depth.iter().map(|(_, d)| d.state()).collect();
-        save_state(&(&*self.sim, previous, depth))
+        save_state(&(&*self.sim, saved, depth))
     }
 
-    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
-        type Saved = (ClothSim, Vec<Arc<DistanceField>>, Vec<DepthBodyState>);
-        let (sim, previous, depth): Saved = load_state(bytes)?;
+    fn load(&mut self, bytes: &[u8], values: &Values) -> imprint_core::Result<()> {
+        type Saved = (
+            ClothSim,
+            Vec<Option<Arc<DistanceField>>>,
+            Vec<DepthBodyState>,
+        );
+        let (sim, saved, depth): Saved = load_state(bytes)?;
+        let mut previous = Vec::with_capacity(saved.len());
+        for (f, c) in saved.into_iter().zip(&self.colliders) {
+            previous.push(match f {
+                Some(f) => f,
+                None => values.field(c)?.cpu(None)?,
+            });
+        }
         *self.sim = sim;
         for ((_, body), s) in self.depth.iter_mut().zip(depth) {
             body.set_state(s)?;

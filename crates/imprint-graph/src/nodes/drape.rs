@@ -2,7 +2,7 @@
 //! body or garment changes.
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
 };
 use crate::schema::defaults;
 use crate::value::{MeshIn, Value};

@@ -2,11 +2,11 @@
 //! it, optionally taking in a layer that piles up on it (`accumulate`).
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
     load_state, save_state,
 };
 use crate::schema::defaults;
-use crate::value::{HeightsIn, MeshIn, Value};
+use crate::value::{HeightsIn, MeshIn, Value, Values};
 use imprint_core::{Error, HeightField, Mesh};
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
@@ -158,9 +158,9 @@ impl Stage for GroundStage {
         let meshes = ctx.values.meshes(&self.objects)?;
         let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
         let stepped = match &mut self.path {
-            Path::Gpu(gpu, r, g) => {
-                g.step_with(gpu, &refs, |m, cam, w, h, o| r.depth_map(gpu, m, cam, w, h, o))
-            }
+            Path::Gpu(gpu, r, g) => g.step_with(gpu, &refs, |m, cam, w, h, o| {
+                r.depth_map(gpu, m, cam, w, h, o)
+            }),
             Path::Raster(gpu, r) => self
                 .sim
                 .step_with(&refs, |m, cam, w, h, o| r.depth_map(gpu, m, cam, w, h, o)),
@@ -175,7 +175,7 @@ impl Stage for GroundStage {
         Ok(Step::computed(Value::Heights(Arc::new(heights))))
     }
 
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
         let gpu_sim = match &self.path {
             Path::Gpu(_, _, g) => Some(g.to_sim(&self.params)?),
             _ => None,
@@ -183,7 +183,7 @@ impl Stage for GroundStage {
         save_state(&(gpu_sim.as_ref().unwrap_or(&self.sim), &self.last))
     }
 
-    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
         let (sim, last): (GroundSim, Option<Arc<HeightField>>) = load_state(bytes)?;
         if let Path::Gpu(gpu, _, g) = &mut self.path {
             **g = GpuGround::from_sim(gpu, &sim)?;

@@ -1,7 +1,7 @@
 //! `Heightmap`: the heights of a mesh seen straight down (or up) through a depth buffer.
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
 };
 use crate::schedule::Schedule;
 use crate::schema::defaults;
@@ -105,10 +105,9 @@ impl Node for HeightmapNode {
                     ));
                 }
                 if !self.empty.is_finite() {
-                    return Err(ctx.fail(
-                        "empty",
-                        format!("empty must be finite, got {}", self.empty),
-                    ));
+                    return Err(
+                        ctx.fail("empty", format!("empty must be finite, got {}", self.empty))
+                    );
                 }
             }
             HeightGrid::Explicit { .. } => {

@@ -2,8 +2,8 @@
 //! optional contact sheet and GIF of the run.
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger,
-    load_state, save_state,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, load_state,
+    save_state,
 };
 use crate::report::NodeReport;
 use crate::schedule::Schedule;
@@ -444,11 +444,11 @@ impl Stage for RenderStage {
         Ok(files)
     }
 
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
         save_state(&self.state)
     }
 
-    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
         self.state = load_state(bytes)?;
         Ok(())
     }

@@ -8,21 +8,21 @@
 //! each joint's section over the same at rest (`imprint_stages::skin::measure::joint_measures`).
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
     load_state, save_state,
 };
 use crate::schema::defaults;
-use crate::value::{MeshIn, Value};
+use crate::value::{MeshIn, Value, Values};
 use glam::{Affine3A, Vec3};
 use imprint_core::{Error, Mesh, Result};
 use imprint_gpu::GpuContext;
+use imprint_stages::skin::blend;
 use imprint_stages::skin::gpu::{BlendMethod, GpuBlend};
 use imprint_stages::skin::gpu_particles::GpuParticleSkin;
 use imprint_stages::skin::measure::joint_measures;
 use imprint_stages::skin::particles::ParticleSkin;
 use imprint_stages::skin::rig::Rig;
 use imprint_stages::skin::weights::{self, Weights};
-use imprint_stages::skin::blend;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value as Json, json};
 use std::any::Any;
@@ -100,10 +100,7 @@ impl Node for SkinNode {
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
         let full = ctx.base_dir.join(&self.rig);
         if !full.is_file() {
-            return Err(ctx.fail(
-                "rig",
-                format!("rig file not found: {}", full.display()),
-            ));
+            return Err(ctx.fail("rig", format!("rig file not found: {}", full.display())));
         }
         // The rig file's own errors name its file, line and column.
         let loaded = crate::rig::load(&full)?;
@@ -164,10 +161,10 @@ impl Stage for SkinNodeStage {
         ctx.push_per_frame(m);
         Ok(Step::computed(Value::Mesh(Arc::new(mesh))))
     }
-    fn save(&self) -> Result<Vec<u8>> {
+    fn save(&self, _values: &Values) -> Result<Vec<u8>> {
         self.stage.save()
     }
-    fn load(&mut self, bytes: &[u8]) -> Result<()> {
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> Result<()> {
         self.stage.load(bytes)
     }
     fn on_gpu(&self) -> bool {
@@ -254,7 +251,11 @@ impl SkinStage {
     /// Takes back what [`SkinStage::save`] gave: the method's state is built again from the
     /// rest mesh (weights, GPU buffers), the particles are the saved ones.
     fn load(&mut self, bytes: &[u8]) -> Result<()> {
-        type Saved = (Option<Arc<Mesh>>, Option<ParticleSkin>, Option<Vec<Affine3A>>);
+        type Saved = (
+            Option<Arc<Mesh>>,
+            Option<ParticleSkin>,
+            Option<Vec<Affine3A>>,
+        );
         let (rest, particles, last_skin): Saved = load_state(bytes)?;
         self.state = None;
         if let Some(rest) = rest {

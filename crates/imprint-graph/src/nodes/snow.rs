@@ -2,11 +2,11 @@
 //! maps from jittered directions, accumulation, slides steeper than the repose angle.
 
 use crate::node::{
-    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, Track,
+    Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
     load_state, save_state,
 };
 use crate::schema::defaults;
-use crate::value::{MeshIn, Value};
+use crate::value::{MeshIn, Value, Values};
 use imprint_core::{Error, HeightField, Mesh};
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
@@ -173,11 +173,11 @@ impl Stage for SnowStage {
         Ok(Step::computed(v))
     }
 
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
         save_state(&*self.sim)
     }
 
-    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
         *self.sim = load_state(bytes)?;
         Ok(())
     }

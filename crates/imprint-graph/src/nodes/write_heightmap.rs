@@ -71,10 +71,7 @@ impl Node for WriteHeightmapNode {
     }
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
         if self.formats.is_empty() {
-            return Err(ctx.fail(
-                "formats",
-                "list at least one of Png16, Exr, Npy, Preview",
-            ));
+            return Err(ctx.fail("formats", "list at least one of Png16, Exr, Npy, Preview"));
         }
         Ok(())
     }

@@ -14,12 +14,16 @@
 //! formulas of [`super::sampler`] and [`super::contact`], start and end fields blended per
 //! substep as on the CPU. The colliders of a frame are copied on the GPU into one buffer
 //! (one binding, any number of colliders); a collider passed again in the same slot is not
-//! copied again.
+//! copied again. A field built on the GPU becomes a collider there
+//! ([`GpuCollider::from_gpu_field`], `shaders/cloth/collider.wgsl`): the same cells, bit for
+//! bit, as uploading the field read back, without reading it back.
 //!
 //! Blow-up detection is per frame: every particle keeps, over the frame's substeps, the first
 //! substep where its position went non-finite or one of its springs passed
 //! `limits.max_stretch`, and the host reads those flags back once per frame (with the
-//! contact counts) and checks the kinetic energy of the last substep. A failed frame puts the
+//! contact counts, and each particle's residual contact, which a last small pass measures
+//! against the end-of-frame colliders and the ground) and checks the kinetic energy of the
+//! last substep. A failed frame puts the
 //! cloth back where it was at the frame's start and returns `Error::Numerical` naming the
 //! node, the frame, the substep and what to change.
 //!
@@ -40,9 +44,9 @@ use super::params::ClothParams;
 use super::shape::ClothShape;
 use super::springs::{Faces, Hinge, LinkQuad, SpringLaw};
 use super::stability::StabilityEstimate;
+use crate::sdf::gpu::GpuField;
 use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
-use crate::sdf::gpu::GpuField;
 use imprint_core::{BoundaryVariant, DistanceField, Error, GridSpec, Mesh, Result};
 use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
 use std::sync::atomic::{AtomicU64, Ordering};

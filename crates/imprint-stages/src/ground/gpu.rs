@@ -27,6 +27,12 @@
 //! 6. **Metrics**: `max_slope` by an atomic max on the GPU; the heights are read back once
 //!    (the CPU copy for the next frame's contact) and the mass summed from them.
 //!
+//! With the GPU rasteriser, [`GpuGround::step_resident`] does step 1 on the GPU too
+//! (`shaders/ground/contact.wgsl`): each object's depth map stays where it was rendered and
+//! becomes bottoms there (the f64 conversions of the CPU done exactly in integers), the
+//! contact's box (32 bytes, read back to size the work window) and the carries; no depth map
+//! is read back and no bottom or carry uploaded, and the heights and metrics are the same.
+//!
 //! Not ported: `Relaxation::Full` ([`GpuGround::new`] refuses it; use [`GroundSim`]), and
 //! [`GroundSim::add_heights`] (move the ground to the CPU and back with
 //! [`GpuGround::to_sim`] / [`GpuGround::from_sim`]).
@@ -35,10 +41,10 @@ use super::contact::{self, GroundGrid, NO_OBJECT, Window};
 use super::cpu::{GroundSim, work_window};
 use super::metrics::GroundFrameMetrics;
 use super::params::{GroundParams, MaterialValues, Relaxation, invalid};
+use crate::depth::HeightView;
 use imprint_core::camera::Camera;
 use imprint_core::raster::{DepthMap, RasterOptions};
 use imprint_core::{Mesh, Result};
-use crate::depth::HeightView;
 use imprint_gpu::raster::GpuRasterizer;
 use imprint_gpu::{Dispatch, GpuContext, record_pass, shader, submit};
 use std::path::Path;

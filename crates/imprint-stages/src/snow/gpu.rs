@@ -20,7 +20,9 @@
 //! [`super::arrival`]'s test. The counts are whole numbers, but from an f32 projection a
 //! shader compiler may fuse, so a receiver exactly at a texel edge or the bias threshold may
 //! come out the other way than on the CPU (none did in `tests/tests/gpu_snow.rs` on Mesa
-//! lavapipe).
+//! lavapipe). [`GpuSnowArrival::arrival_resident`] takes the maps of a
+//! `GpuRasterizer` where they were rendered instead: no map is read back or uploaded, and the
+//! counts are the same (only they are read back, for the deposit on the CPU).
 //!
 //! **Use.** [`SnowSim::relax_with`](super::SnowSim::relax_with) takes
 //! [`GpuSnowRelax::relaxer`]; [`SnowSim::step_with_parts`](super::SnowSim::step_with_parts)
@@ -441,8 +443,7 @@ impl GpuSnowArrival {
         params: &SnowParams,
     ) -> Result<Arrival> {
         let directions_rendered = directions.len() as u32;
-        let Some(run) =
-            LookupRun::start(ctx, occluder, receivers, directions, "lookup_resident")?
+        let Some(run) = LookupRun::start(ctx, occluder, receivers, directions, "lookup_resident")?
         else {
             return Ok(Arrival {
                 counts: vec![0; receivers.points.len()],
@@ -453,8 +454,14 @@ impl GpuSnowArrival {
         let res = params.resolution;
         for &dir in directions {
             let cam = snow_camera(&bounds, dir, res)?;
-            let map =
-                raster.depth_map_resident(ctx, occluder, &cam, res, res, &RasterOptions::default())?;
+            let map = raster.depth_map_resident(
+                ctx,
+                occluder,
+                &cam,
+                res,
+                res,
+                &RasterOptions::default(),
+            )?;
             let look = Lookup::for_camera(&map.camera, map.height);
             let p = LookupParams::new(&look, dir, params, run.threads, map.row_texels);
             run.look_up(ctx, &p, 5, map.texels());

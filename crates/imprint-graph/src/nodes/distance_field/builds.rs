@@ -4,11 +4,11 @@
 
 use crate::schedule::Schedule;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Mesh};
-use serde::{Deserialize, Serialize};
 use imprint_stages::mesh::MeshSource;
 use imprint_stages::sdf::FieldBuilder;
 use imprint_stages::sdf::cpu::FieldBuild;
 use imprint_stages::voxel::cpu::Voxelizer;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -28,8 +28,7 @@ pub enum Published {
     },
 }
 
-impl Published {
-}
+impl Published {}
 
 /// The mesh and voxeliser an interpolated field evaluates at keyframe times.
 pub struct Ahead {
@@ -45,7 +44,6 @@ impl Ahead {
         let b = self.voxelizer.run(&mesh, self.variant)?;
         Ok((Arc::new(mesh), b))
     }
-
 }
 
 /// A build under way: its keyframe and the next part to run.
@@ -207,7 +205,12 @@ impl FieldSchedule {
                     mesh: Some(mesh),
                 });
             }
-            if let Some(job) = self.state.job.as_mut().filter(|j| j.key == key && j.next == part) {
+            if let Some(job) = self
+                .state
+                .job
+                .as_mut()
+                .filter(|j| j.key == key && j.next == part)
+            {
                 job.build.run_part(part, sc.split);
                 job.next += 1;
                 worked = true;

@@ -11,7 +11,7 @@ use crate::node::{
 use crate::nodes::voxelize::VoxelizeNode;
 use crate::schedule::Schedule;
 use crate::schema::defaults;
-use crate::value::{BoundaryIn, BoundaryValue, FieldData, FieldValue, MeshIn, Value};
+use crate::value::{BoundaryIn, BoundaryValue, FieldData, FieldValue, MeshIn, Value, Values};
 use builds::{Ahead, BuildState, FieldSchedule, Published};
 use imprint_core::bvh::Bvh;
 use imprint_core::{DistanceField, Error, Mesh};
@@ -204,7 +204,11 @@ struct FieldStage {
 impl Stage for FieldStage {
     fn run(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<Step> {
         let (mut step, published) = if self.sched.schedule.interpolate {
-            let is_static = self.sched.ahead.as_ref().is_some_and(|a| a.mesh.is_static());
+            let is_static = self
+                .sched
+                .ahead
+                .as_ref()
+                .is_some_and(|a| a.mesh.is_static());
             let s = self.sched.step_interpolated(
                 ctx.frame as i64,
                 ctx.first_frame as i64,
@@ -251,11 +255,11 @@ impl Stage for FieldStage {
         Ok(step)
     }
 
-    fn save(&self) -> imprint_core::Result<Vec<u8>> {
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
         save_state(&(self.measured, self.builds, self.sched.state()))
     }
 
-    fn load(&mut self, bytes: &[u8]) -> imprint_core::Result<()> {
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
         let (measured, builds, state): (u32, u32, BuildState) = load_state(bytes)?;
         self.measured = measured;
         self.builds = builds;
@@ -295,7 +299,10 @@ impl FieldStage {
     }
 
     /// Builds on the CPU, whole or in parts.
-    fn run_cpu(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<(Step, Option<Published>)> {
+    fn run_cpu(
+        &mut self,
+        ctx: &mut FrameCtx<'_>,
+    ) -> imprint_core::Result<(Step, Option<Published>)> {
         let sc = self.sched.schedule;
         let builds = ctx.first || (ctx.key && ctx.changed);
         // Last frame's field, if nobody holds it any more, lends its buffers.
@@ -309,9 +316,11 @@ impl FieldStage {
         }
         let (values, gpu) = (ctx.values, ctx.gpu);
         let input = &self.input;
-        let s = self.sched.step(ctx.frame as i64, ctx.first, ctx.changed, || {
-            values.boundary(input)?.cpu(gpu)
-        })?;
+        let s = self
+            .sched
+            .step(ctx.frame as i64, ctx.first, ctx.changed, || {
+                values.boundary(input)?.cpu(gpu)
+            })?;
         Ok((step_of(s.worked, s.began), s.published))
     }
 }
@@ -341,7 +350,9 @@ impl FieldStage {
         // A build split over frames read the mesh of its first frame, which is gone.
         let finished: Vec<(Finished, Arc<Mesh>)> = if sc.interpolate {
             let f = &self.sched.finished;
-            f.iter().map(|(f, m)| (Finished::Cpu(f.clone()), m.clone())).collect()
+            f.iter()
+                .map(|(f, m)| (Finished::Cpu(f.clone()), m.clone()))
+                .collect()
         } else if let (true, 1, Some(Value::Field(v))) = (new_build, sc.split, &step.published) {
             let mesh = ctx.values.mesh(&self.mesh)?.clone();
             let f = match &v.data {

@@ -1,0 +1,320 @@
+//! Resumable runs: a run cut into pieces with `--checkpoint-every` and `--resume` ends with
+//! the same bytes as one uninterrupted run, for every node kind that carries state from frame
+//! to frame; an interrupted run keeps its report and checkpoint; bad `--resume` input is
+//! refused with exit code 2 and changes nothing.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn imprint(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_imprint"))
+        .args(args)
+        .current_dir(cwd)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("imprint runs")
+}
+
+fn run_ok(args: &[&str], cwd: &Path) -> Output {
+    let out = imprint(args, cwd);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+}
+
+/// Every stateful node kind in one small scene: cloths against an interpolated, split field
+/// of a breathing bunny, and against a static cow's field and a field built every 3 frames
+/// (a collider that did not change is read as static, not as a blend of equal fields: on the
+/// cow's back the two differ), a
+/// cloth against a body's depth maps, snow on a ground that a rolling
+/// ball presses (taking the snow in), particle skinning; writers of every kind, with a
+/// contact sheet and a GIF, some on every other frame.
+fn stateful_scene(frames: u32) -> String {
+    let root = root();
+    let bunny = root.join("assets/meshes/stanford-bunny.obj");
+    let rig = root.join("assets/rigs/limb.ron");
+    let cow = root.join("assets/meshes/cow.obj");
+    format!(
+        r#"Pipeline(
+    frames: {frames},
+    fps: 24,
+    backend: Cpu,
+    nodes: {{
+        "bunny": Mesh(path: "{bunny}", fit: (size: 0.6, center: (0, 0.3, 0)),
+                      motion: [Breathe(amplitude: 0.05, period: 1.0), Twist(axis: Y, degrees: 20, period: 1.0)]),
+        "vox": Voxelize(mesh: "bunny", grid: Fit(resolution: 32, padding: 0.15)),
+        "field_i": DistanceField(boundary: "vox", band: 2.5, measure: Never, every: 4, split: 2,
+                                 interpolate: true),
+        "field": DistanceField(boundary: "vox", band: 2.5, every: 3, offset: 1, measure: Every(2)),
+        "cloth": Cloth(colliders: ["field_i"], params: (
+            shape: Grid(size: (0.7, 0.7), resolution: (12, 12), center: (0, 0.75, 0), normal: (0, 1, 0)),
+            material: Harada(k_structural: 30.0, k_shear: 7.5), mass: 0.002, damping: 0.99,
+            collision: (epsilon: 0.01, friction: 0.4, ground: 0.0), substeps: 8)),
+        "rock": Mesh(path: "{cow}", fit: (size: 0.6, center: (0.6, 0.2, 0.5))),
+        "rock_vox": Voxelize(mesh: "rock", grid: Fit(resolution: 24, padding: 0.3)),
+        "rock_field": DistanceField(boundary: "rock_vox", band: 2.5, measure: Never),
+        "cloth_k": Cloth(colliders: ["rock_field", "field"], params: (
+            shape: Grid(size: (0.4, 0.4), resolution: (10, 10), center: (0.6, 0.42, 0.5), normal: (0, 1, 0)),
+            material: Harada(k_structural: 30.0, k_shear: 7.5), mass: 0.002, damping: 0.99,
+            collision: (epsilon: 0.01, friction: 0.4, ground: 0.0), substeps: 8)),
+        "draped": Cloth(depth_colliders: [(body: "bunny", params: (resolution: 64))], params: (
+            shape: Grid(size: (0.7, 0.7), resolution: (10, 10), center: (0, 0.8, 0), normal: (0, 1, 0)),
+            material: Harada(k_structural: 30.0, k_shear: 7.5), mass: 0.002, damping: 0.99,
+            collision: (epsilon: 0.01, friction: 0.4, ground: 0.0), substeps: 8)),
+        "ball": Mesh(primitive: Sphere(radius: 0.1, segments: 16, rings: 8),
+                     fit: (size: 0.2, center: (-0.4, 0.07, 0.0)),
+                     motion: [Rigid(keys: [(time: 0.0), (time: 1.0, translate: (0.8, 0, 0))])]),
+        "snow": Snow(meshes: ["ball"], ground: (size: (1.0, 1.0), resolution: (40, 40), height: 0.05),
+                     params: (directions: 2, resolution: 64, rate: 0.05)),
+        "ground": Ground(objects: ["ball"], accumulate: "snow",
+                         params: (size: (1.0, 1.0), resolution: (40, 40), initial: Flat(0.05),
+                                  material: Preset(Sand))),
+        "limb": Mesh(primitive: Cylinder(radius: 0.1, length: 1.0, segments: 12, rings: 10)),
+        "skin": Skin(mesh: "limb", rig: "{rig}", method: Particles(), offset: (0.8, 0, 0)),
+        "render": Render(
+            objects: [Mesh(mesh: "bunny"), Mesh(mesh: "cloth"), Mesh(mesh: "draped"),
+                      Mesh(mesh: "cloth_k"),
+                      Mesh(mesh: "skin"), HeightField(heights: "ground"),
+                      FieldSlice(field: "field", axis: Z)],
+            camera: Orbit(distance: 2.5, spin: 20), width: 96, height: 72, samples: 1,
+            every: 2, contact_sheet: (every: 1, columns: 3, width: 48), gif: (width: 64)),
+        "cloth_obj": WriteMesh(mesh: "cloth", format: Ply),
+        "cloth_k_obj": WriteMesh(mesh: "cloth_k", format: Ply),
+        "draped_obj": WriteMesh(mesh: "draped", format: Ply, every: 2),
+        "skin_obj": WriteMesh(mesh: "skin", every: 3),
+        "heights": WriteHeightmap(heights: "ground", formats: [Npy, Png16]),
+        "fields": WriteField(field: "field", every: 2, slices: [(axis: X)]),
+    }},
+)
+"#,
+        bunny = bunny.display(),
+        rig = rig.display(),
+        cow = cow.display(),
+    )
+}
+
+/// Every file under `dir` but the report and the checkpoint, with its bytes.
+fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if !["report.json", "checkpoint.bin"]
+                .contains(&p.file_name().unwrap().to_str().unwrap())
+            {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+fn assert_same_outputs(whole: &Path, pieces: &Path) {
+    let (a, b) = (outputs(whole), outputs(pieces));
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "the same files"
+    );
+    let differ: Vec<_> = a
+        .iter()
+        .filter(|(k, v)| b[*k] != **v)
+        .map(|(k, _)| k)
+        .collect();
+    assert!(differ.is_empty(), "files that differ: {differ:?}");
+    assert!(a.len() > 30, "{} files", a.len());
+}
+
+fn report(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// A run cut in three (4 frames, then on to 8 from the checkpoint, then on to 12, each piece
+/// with other checkpoint spacings) ends with the same bytes as one run of 12 frames: cloths
+/// against interpolated and depth-map colliders, ground, snow, particle skinning, split
+/// field builds, and the contact sheet and GIF. Its report lists all 12 frames.
+#[test]
+fn a_run_cut_in_three_with_resume_equals_the_whole_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("scene.ron");
+    std::fs::write(&file, stateful_scene(12)).unwrap();
+    let f = file.to_str().unwrap();
+    run_ok(&["run", f, "--out", "whole"], dir.path());
+    let cut = ["run", f, "--out", "cut"];
+    run_ok(
+        &[&cut[..], &["--frames", "0..4", "--checkpoint-every", "3"]].concat(),
+        dir.path(),
+    );
+    let out = run_ok(
+        &[
+            &cut[..],
+            &["--frames", "0..8", "--resume", "--checkpoint-every", "1"],
+        ]
+        .concat(),
+        dir.path(),
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("resuming at frame 4"));
+    run_ok(
+        &[&cut[..], &["--frames", "0..12", "--resume"]].concat(),
+        dir.path(),
+    );
+    assert_same_outputs(&dir.path().join("whole"), &dir.path().join("cut"));
+    let r = report(&dir.path().join("cut"));
+    assert_eq!(r["frames"].as_array().unwrap().len(), 12, "{}", r["frames"]);
+    assert_eq!(r["resumed_at"], 8);
+    // The cloth's per-frame metrics run on across the cuts, one entry per frame.
+    let per_frame = &r["nodes"]["cloth"]["metrics"]["per_frame"];
+    assert_eq!(per_frame.as_array().unwrap().len(), 12);
+    // No temporary file is left behind.
+    let tmp: Vec<_> = outputs(&dir.path().join("cut"))
+        .into_keys()
+        .filter(|p| p.to_string_lossy().contains(".tmp"))
+        .collect();
+    assert!(tmp.is_empty(), "{tmp:?}");
+}
+
+/// Ctrl-C stops a run between frames with exit code 130, leaving report.json with the frames
+/// done and why, and a checkpoint that a resumed run finishes from to the same bytes.
+#[test]
+fn an_interrupted_run_keeps_its_report_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("scene.ron");
+    std::fs::write(&file, stateful_scene(12)).unwrap();
+    let f = file.to_str().unwrap();
+    run_ok(&["run", f, "--out", "whole"], dir.path());
+    let cut = dir.path().join("cut");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_imprint"))
+        .args(["run", f, "--out", "cut", "--checkpoint-every", "2"])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Interrupt once the first checkpoint is there (the run is then under way).
+    let start = std::time::Instant::now();
+    while !cut.join("checkpoint.bin").exists() && start.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let pid = child.id().to_string();
+    Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    let status = child.wait().unwrap();
+    let r = report(&cut);
+    let done = r["frames"].as_array().unwrap().len();
+    if status.code() == Some(0) {
+        // The run finished before the signal arrived: nothing to resume.
+        assert_eq!(done, 12);
+    } else {
+        assert_eq!(status.code(), Some(130));
+        assert!(done < 12);
+        let why = r["error"].as_str().unwrap();
+        assert!(
+            why.contains(&format!("interrupted before frame {done}")),
+            "{why}"
+        );
+        let out = run_ok(&["run", f, "--out", "cut", "--resume"], dir.path());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(&format!("resuming at frame {done}")), "{err}");
+    }
+    assert_same_outputs(&dir.path().join("whole"), &cut);
+}
+
+/// `--resume` into a folder with no checkpoint, with a checkpoint of another pipeline, or of
+/// a run that began at another frame: exit code 2, a message that says what to do, and the
+/// folder's files unchanged.
+#[test]
+fn bad_resume_input_is_refused_and_changes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = d.join("scene.ron");
+    std::fs::write(&file, stateful_scene(6)).unwrap();
+    let f = file.to_str().unwrap();
+
+    let out = imprint(&["run", f, "--out", "empty", "--resume"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("no checkpoint in") && err.contains("--checkpoint-every"),
+        "{err}"
+    );
+    assert!(!d.join("empty/report.json").exists());
+
+    run_ok(
+        &[
+            "run",
+            f,
+            "--out",
+            "o",
+            "--frames",
+            "0..3",
+            "--checkpoint-every",
+            "3",
+        ],
+        d,
+    );
+    let before = outputs(&d.join("o"));
+    let report_before = std::fs::read(d.join("o/report.json")).unwrap();
+    let checkpoint_before = std::fs::read(d.join("o/checkpoint.bin")).unwrap();
+    let unchanged = || {
+        assert_eq!(outputs(&d.join("o")), before);
+        assert_eq!(
+            std::fs::read(d.join("o/report.json")).unwrap(),
+            report_before
+        );
+        assert_eq!(
+            std::fs::read(d.join("o/checkpoint.bin")).unwrap(),
+            checkpoint_before
+        );
+    };
+
+    let other = d.join("other.ron");
+    let text = stateful_scene(6).replacen("k_structural: 30.0", "k_structural: 60.0", 1);
+    assert_ne!(text, stateful_scene(6));
+    std::fs::write(&other, text).unwrap();
+    let out = imprint(
+        &["run", other.to_str().unwrap(), "--out", "o", "--resume"],
+        d,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("different pipeline") && err.contains("node 'cloth'"),
+        "{err}"
+    );
+    unchanged();
+
+    let out = imprint(&["run", f, "--out", "o", "--frames", "1..6", "--resume"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("began at frame 0") && err.contains("--frames 0..6"),
+        "{err}"
+    );
+    unchanged();
+
+    let out = imprint(&["run", f, "--out", "o", "--frames", "0..2", "--resume"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("at frame 3, outside --frames 0..2"), "{err}");
+    unchanged();
+
+    std::fs::create_dir_all(d.join("garbage")).unwrap();
+    std::fs::write(d.join("garbage/checkpoint.bin"), b"not a checkpoint").unwrap();
+    let out = imprint(&["run", f, "--out", "garbage", "--resume"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("not an imprint checkpoint"), "{err}");
+}
