@@ -1237,3 +1237,68 @@ fn skin_node_input_errors_name_the_field() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("method") && err.contains("substeps"), "{err}");
 }
+
+/// H's scene on the GPU (`harada_cloth.ron --backend gpu`, its first 3 frames): the field
+/// built on the GPU feeds the GPU cloth without coming back to the CPU. report.json counts
+/// the bytes each node moved: no field is read back, voxeliser and field read nothing back,
+/// and the cloth reads back only its own state (under 100 bytes per particle).
+#[test]
+fn gpu_field_feeds_gpu_cloth_without_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../pipelines/harada_cloth.ron"
+    ));
+    let gpu = imprint(
+        &[
+            "run",
+            file.to_str().unwrap(),
+            "--out",
+            "o",
+            "--backend",
+            "gpu",
+            "--frames",
+            "0..3",
+        ],
+        dir.path(),
+    );
+    let err = String::from_utf8_lossy(&gpu.stderr);
+    if gpu.status.code() == Some(1) && err.contains("no GPU adapter") {
+        assert!(
+            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "IMPRINT_REQUIRE_GPU=1 but: {err}"
+        );
+        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+        return;
+    }
+    assert_eq!(gpu.status.code(), Some(0), "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("o/report.json")).unwrap()).unwrap();
+    let nodes = report["nodes"].as_object().unwrap();
+    let moved = |node: &str, key: &str| -> Vec<u64> {
+        let t = nodes[node]["transfers"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
+        t.iter().map(|f| f[key].as_u64().unwrap_or(0)).collect()
+    };
+    for node in ["boundary", "field", "cloth"] {
+        assert_eq!(nodes[node]["backend"], "gpu", "{node}");
+    }
+    for (name, _) in nodes {
+        assert!(
+            moved(name, "field_read_backs").iter().all(|&n| n == 0),
+            "{name} read a field back: {}",
+            nodes[name]["transfers"]
+        );
+    }
+    assert!(moved("boundary", "read_back_bytes").iter().all(|&b| b == 0));
+    assert!(moved("field", "read_back_bytes").iter().all(|&b| b == 0));
+    let cloth = moved("cloth", "read_back_bytes");
+    assert_eq!(cloth.len(), 3, "the cloth's state comes back once a frame");
+    let particles = 70 * 70;
+    assert!(
+        cloth.iter().all(|&b| b > 0 && b < 100 * particles),
+        "{cloth:?}"
+    );
+}

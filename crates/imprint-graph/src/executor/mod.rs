@@ -8,19 +8,18 @@
 
 mod checkpoint;
 mod reload;
+mod wave;
 
 pub use checkpoint::{CHECKPOINT_FILE, Checkpoint, checkpoint_path};
 
 use crate::exec::{Observed, Observer, RunOptions};
-use crate::node::{BuildCtx, CheckCtx, FrameCtx, Stage, Step};
+use crate::node::{BuildCtx, CheckCtx, Stage};
 use crate::plan::Plan;
-use crate::report::{FrameTransfers, NodeReport, Report};
+use crate::report::{NodeReport, Report};
 use crate::schedule::Schedule;
 use crate::value::{Value, Values};
 use imprint_core::{Aabb, Error};
 use imprint_gpu::GpuContext;
-use imprint_gpu::transfer;
-use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::time::Instant;
@@ -29,8 +28,8 @@ use std::time::Instant;
 pub(crate) struct Slot {
     pub name: String,
     /// Its input nodes, in port order.
-    inputs: Vec<String>,
-    schedule: Schedule,
+    pub(crate) inputs: Vec<String>,
+    pub(crate) schedule: Schedule,
     pub stage: Box<dyn Stage>,
     pub report: NodeReport,
     /// Its inputs' versions when it last took them in.
@@ -56,7 +55,7 @@ pub struct Executor {
     pub(crate) gpu: Option<&'static GpuContext>,
     pub(crate) slots: Vec<Slot>,
     /// Indices into `slots`, wave by wave.
-    waves: Vec<Vec<usize>>,
+    pub(crate) waves: Vec<Vec<usize>>,
     pub(crate) values: Values,
     /// Each node's output version: it goes up with every value the node publishes.
     pub(crate) versions: BTreeMap<String, u64>,
@@ -68,6 +67,8 @@ pub struct Executor {
     /// Checkpoints kept in memory for `seek`, by next frame, and how often.
     kept: BTreeMap<u32, Vec<u8>>,
     keep_every: u32,
+    /// Run a wave's nodes at once (the default), or one after the other in plan order.
+    pub(crate) concurrent: bool,
 }
 
 impl Executor {
@@ -103,12 +104,13 @@ impl Executor {
             started: Instant::now(),
             kept: BTreeMap::new(),
             keep_every: 0,
+            concurrent: true,
         };
         for name in &plan.order {
             let slot = ex.build_slot(name)?;
             ex.slots.push(slot);
         }
-        ex.waves = waves(&ex.slots);
+        ex.waves = wave::waves(&ex.slots);
         ex.report.adapter = ex.gpu.map(|g| g.adapter_name());
         Ok(ex)
     }
@@ -178,6 +180,21 @@ impl Executor {
         self.values.get(name)
     }
 
+    /// Runs each wave's nodes at once (`true`, the default) or one after the other in plan
+    /// order; the results are the same.
+    pub fn set_concurrent(&mut self, concurrent: bool) {
+        self.concurrent = concurrent;
+    }
+
+    /// The running nodes, wave by wave: no path joins two nodes of a wave.
+    pub fn waves(&self) -> Vec<Vec<String>> {
+        let name = |i: &usize| self.slots[*i].name.clone();
+        self.waves
+            .iter()
+            .map(|w| w.iter().map(name).collect())
+            .collect()
+    }
+
     /// The GPU, when a node runs there (to read GPU values back).
     pub fn gpu(&self) -> Option<&'static GpuContext> {
         self.gpu
@@ -240,101 +257,6 @@ impl Executor {
         Ok(summary)
     }
 
-    /// Runs wave `w` of `frame`: its nodes at once, their results applied in plan order.
-    /// Returns (slot, ms, worked) per node.
-    fn run_wave(&mut self, w: usize, frame: u32) -> crate::Result<Vec<(usize, f64, bool)>> {
-        let wave = &self.waves[w];
-        let mut jobs: Vec<Job> = Vec::with_capacity(wave.len());
-        for &i in wave {
-            let slot = &self.slots[i];
-            let inputs: Vec<u64> = slot
-                .inputs
-                .iter()
-                .map(|n| self.versions.get(n).copied().unwrap_or(0))
-                .collect();
-            let changed = slot.seen.as_ref() != Some(&inputs);
-            let own = self.values.take(&slot.name);
-            jobs.push(Job {
-                slot: i,
-                inputs,
-                changed,
-                own,
-                outcome: None,
-            });
-        }
-        let ctx = Shared {
-            values: &self.values,
-            gpu: self.gpu,
-            frame,
-            fps: self.plan.file.fps,
-            first_frame: self.frames.start,
-        };
-        let mut slots: Vec<&mut Slot> = self
-            .slots
-            .iter_mut()
-            .enumerate()
-            .filter(|(i, _)| wave.contains(i))
-            .map(|(_, s)| s)
-            .collect();
-        slots
-            .par_iter_mut()
-            .zip(jobs.par_iter_mut())
-            .for_each(|(slot, job)| job.run(slot, &ctx));
-        let mut ran = Vec::with_capacity(jobs.len());
-        let mut failed = None;
-        for job in jobs {
-            let (i, worked, ms) = (job.slot, job.worked(), job.ms());
-            if let Err(e) = self.apply(job, frame) {
-                failed.get_or_insert(e);
-            }
-            ran.push((i, ms, worked));
-        }
-        match failed {
-            Some(e) => Err(e),
-            None => Ok(ran),
-        }
-    }
-
-    /// A node's result: its value, its version, what it took in, its time.
-    fn apply(&mut self, mut job: Job, frame: u32) -> crate::Result<()> {
-        let (result, ms, moved) = job.outcome.take().expect("every job ran");
-        let slot = &mut self.slots[job.slot];
-        let step = match result {
-            Ok(step) => step,
-            Err(e) => {
-                // The last good value stays, for a viewer that goes on after the error.
-                if let Some(own) = job.own.take() {
-                    self.values.set(&slot.name, own);
-                }
-                return Err(e.into());
-            }
-        };
-        match (step.published, job.own.take()) {
-            (Some(v), _) => {
-                self.values.set(&slot.name, v);
-                *self.versions.entry(slot.name.clone()).or_default() += 1;
-            }
-            (None, Some(own)) => self.values.set(&slot.name, own),
-            (None, None) => {}
-        }
-        if step.consumed {
-            slot.seen = Some(job.inputs);
-        }
-        if step.worked {
-            slot.report.record(frame, ms - step.untimed_ms);
-        }
-        self.report.files_written += step.files;
-        if moved.uploaded_bytes + moved.read_back_bytes > 0 {
-            slot.report.transfers.push(FrameTransfers {
-                frame,
-                uploaded_bytes: moved.uploaded_bytes,
-                read_back_bytes: moved.read_back_bytes,
-                field_read_backs: moved.field_read_backs,
-            });
-        }
-        Ok(())
-    }
-
     /// Shows slot `i`'s value to `obs`; returns the time it took (not the frame's), ms.
     fn observe(&self, obs: &mut dyn Observer, i: usize, frame: u32) -> crate::Result<f64> {
         let name = &self.slots[i].name;
@@ -358,78 +280,4 @@ impl Executor {
         }
         Ok(self.report())
     }
-}
-
-/// What every node of a wave shares.
-struct Shared<'a> {
-    values: &'a Values,
-    gpu: Option<&'static GpuContext>,
-    frame: u32,
-    fps: f32,
-    first_frame: u32,
-}
-
-/// One node's run within a wave.
-struct Job {
-    slot: usize,
-    /// Its inputs' versions now.
-    inputs: Vec<u64>,
-    changed: bool,
-    /// Its value, lent for the run.
-    own: Option<Value>,
-    /// The run's result, its time (ms) and the bytes it moved.
-    outcome: Option<(imprint_core::Result<Step>, f64, transfer::Transfers)>,
-}
-
-impl Job {
-    fn run(&mut self, slot: &mut Slot, s: &Shared<'_>) {
-        let t0 = Instant::now();
-        let before = transfer::snapshot();
-        let mut ctx = FrameCtx {
-            name: &slot.name,
-            frame: s.frame,
-            time: s.frame as f32 / s.fps,
-            fps: s.fps,
-            first_frame: s.first_frame,
-            first: self.own.is_none(),
-            own: self.own.take(),
-            key: slot.schedule.is_key(s.frame as i64),
-            changed: self.changed,
-            values: s.values,
-            gpu: s.gpu,
-            report: &mut slot.report,
-        };
-        let result = slot.stage.run(&mut ctx);
-        self.own = ctx.own.take();
-        let moved = transfer::snapshot().since(&before);
-        self.outcome = Some((result, t0.elapsed().as_secs_f64() * 1e3, moved));
-    }
-
-    fn worked(&self) -> bool {
-        matches!(&self.outcome, Some((Ok(s), ..)) if s.worked)
-    }
-
-    fn ms(&self) -> f64 {
-        self.outcome.as_ref().map_or(0.0, |o| o.1)
-    }
-}
-
-/// The slots in waves: a node's wave is one more than its latest input's.
-fn waves(slots: &[Slot]) -> Vec<Vec<usize>> {
-    let mut level: BTreeMap<&str, usize> = BTreeMap::new();
-    let mut waves: Vec<Vec<usize>> = Vec::new();
-    for (i, s) in slots.iter().enumerate() {
-        let l = s
-            .inputs
-            .iter()
-            .filter_map(|n| level.get(n.as_str()).map(|l| l + 1))
-            .max()
-            .unwrap_or(0);
-        level.insert(&s.name, l);
-        if waves.len() <= l {
-            waves.resize(l + 1, Vec::new());
-        }
-        waves[l].push(i);
-    }
-    waves
 }

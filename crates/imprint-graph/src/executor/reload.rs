@@ -2,7 +2,8 @@
 //! checkpoints it keeps in memory (or from the start), and `reload` a new plan keeping the
 //! state of every node whose spec and inputs did not change.
 
-use super::{Executor, waves};
+use super::Executor;
+use super::wave::waves;
 use crate::plan::Plan;
 use imprint_core::Error;
 use std::collections::{BTreeMap, BTreeSet};
@@ -51,11 +52,13 @@ impl Executor {
 
     /// Back to before the first frame: every stage built again, no values.
     fn reset(&mut self) -> crate::Result<()> {
+        let fresh = Executor::new(&self.plan, self.opts.clone())?;
         let kept = std::mem::take(&mut self.kept);
-        let every = self.keep_every;
-        *self = Executor::new(&self.plan.clone(), self.opts.clone())?;
+        let (every, concurrent) = (self.keep_every, self.concurrent);
+        *self = fresh;
         self.kept = kept;
         self.keep_every = every;
+        self.concurrent = concurrent;
         Ok(())
     }
 

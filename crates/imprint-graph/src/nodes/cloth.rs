@@ -6,7 +6,7 @@ use crate::node::{
     load_state, save_state,
 };
 use crate::schema::defaults;
-use crate::value::{FieldData, FieldIn, MeshIn, Value, Values};
+use crate::value::{FieldData, FieldIn, FieldValue, MeshIn, Value, Values};
 use imprint_core::DistanceField;
 use imprint_gpu::GpuContext;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
@@ -161,12 +161,22 @@ impl ClothNode {
     }
 }
 
-/// The GPU cloth and the colliders it saw last frame (uploaded once per field: a static
-/// field is not uploaded again).
+/// The GPU cloth and the colliders it saw last frame (made once per field value: a static
+/// field is not uploaded again, and a GPU-built one never leaves the GPU).
 struct GpuPath {
     gpu: &'static GpuContext,
     cloth: Box<GpuCloth>,
-    previous: Vec<(Arc<DistanceField>, Arc<GpuCollider>)>,
+    previous: Vec<(Arc<FieldValue>, Arc<GpuCollider>)>,
+}
+
+impl GpuPath {
+    /// The collider of field value `v` on the GPU.
+    fn collider(&self, v: &FieldValue) -> imprint_core::Result<GpuCollider> {
+        match &v.data {
+            FieldData::Gpu(f) => GpuCollider::from_gpu_field(self.gpu, f),
+            _ => GpuCollider::from_field(self.gpu, &*v.cpu(Some(self.gpu))?),
+        }
+    }
 }
 
 struct ClothStage {
@@ -195,16 +205,23 @@ impl Stage for ClothStage {
     }
 
     fn save(&self, values: &Values) -> imprint_core::Result<Vec<u8>> {
-        let previous: Vec<&Arc<DistanceField>> = match &self.gpu {
-            Some(g) => g.previous.iter().map(|(f, _)| f).collect(),
-            None => self.previous.iter().collect(),
-        };
         // A field that is still its collider's value is saved as that (the cloth reads a
         // collider that did not change as static, not as a blend of two equal fields).
-        let mut saved = Vec::with_capacity(previous.len());
-        for (f, c) in previous.into_iter().zip(&self.colliders) {
-            let same = matches!(&values.field(c)?.data, FieldData::Cpu(v) if Arc::ptr_eq(v, f));
-            saved.push(if same { None } else { Some(f) });
+        let mut saved: Vec<Option<Arc<DistanceField>>> = Vec::new();
+        for (k, c) in self.colliders.iter().enumerate() {
+            let now = values.field(c)?;
+            saved.push(match &self.gpu {
+                Some(g) => match g.previous.get(k) {
+                    Some((v, _)) if Arc::ptr_eq(v, now) => None,
+                    Some((v, _)) => Some(v.cpu(Some(g.gpu))?),
+                    None => continue,
+                },
+                None => match self.previous.get(k) {
+                    Some(f) if matches!(&now.data, FieldData::Cpu(v) if Arc::ptr_eq(v, f)) => None,
+                    Some(f) => Some(f.clone()),
+                    None => continue,
+                },
+            });
         }
         let depth: Vec<DepthBodyState> = self.depth.iter().map(|(_, d)| d.state()).collect();
         save_state(&(&*self.sim, saved, depth))
@@ -220,8 +237,8 @@ impl Stage for ClothStage {
         let mut previous = Vec::with_capacity(saved.len());
         for (f, c) in saved.into_iter().zip(&self.colliders) {
             previous.push(match f {
-                Some(f) => f,
-                None => values.field(c)?.cpu(None)?,
+                Some(f) => FieldValue::new(FieldData::Cpu(f)),
+                None => values.field(c)?.clone(),
             });
         }
         *self.sim = sim;
@@ -232,12 +249,17 @@ impl Stage for ClothStage {
             Some(g) => {
                 g.cloth = Box::new(GpuCloth::new(g.gpu, &self.sim)?);
                 g.previous = Vec::with_capacity(previous.len());
-                for f in previous {
-                    let up = Arc::new(GpuCollider::from_field(g.gpu, &f)?);
-                    g.previous.push((f, up));
+                for v in previous {
+                    let up = Arc::new(g.collider(&v)?);
+                    g.previous.push((v, up));
                 }
             }
-            None => self.previous = previous,
+            None => {
+                self.previous = previous
+                    .iter()
+                    .map(|v| v.cpu(None))
+                    .collect::<imprint_core::Result<_>>()?;
+            }
         }
         Ok(())
     }
@@ -303,39 +325,31 @@ impl ClothStage {
 }
 
 /// One frame on the GPU. Interpolated colliders arrive as fields blended at the frame's end
-/// (and last frame's end is this frame's start). The CPU simulator mirrors the GPU's state
-/// once per frame: the same metrics as the CPU path, and the mesh from one read-back.
+/// (and last frame's end is this frame's start); GPU-built fields stay on the GPU. The CPU
+/// simulator mirrors the GPU's state once per frame (one read-back, which also gives the
+/// mesh), with the metrics the GPU measured.
 fn step_gpu(
     g: &mut GpuPath,
     sim: &mut ClothSim,
     colliders: &[FieldIn],
     ctx: &mut FrameCtx<'_>,
 ) -> imprint_core::Result<serde_json::Value> {
-    let end = colliders
-        .iter()
-        .map(|c| ctx.values.field(c)?.cpu(ctx.gpu))
-        .collect::<imprint_core::Result<Vec<_>>>()?;
-    let mut now = Vec::with_capacity(end.len());
-    for (k, f) in end.iter().enumerate() {
-        let same = g.previous.get(k).filter(|(cf, _)| Arc::ptr_eq(cf, f));
-        let up = match same {
-            Some((_, u)) => u.clone(),
-            None => Arc::new(GpuCollider::from_field(g.gpu, f)?),
+    let mut now = Vec::with_capacity(colliders.len());
+    for (k, c) in colliders.iter().enumerate() {
+        let v = ctx.values.field(c)?;
+        let up = match g.previous.get(k) {
+            Some((p, u)) if Arc::ptr_eq(p, v) => u.clone(),
+            _ => Arc::new(g.collider(v)?),
         };
-        now.push((f.clone(), up));
+        now.push((v.clone(), up));
     }
     let start: Vec<&GpuCollider> = g.previous.iter().map(|(_, u)| &**u).collect();
-    let end_refs: Vec<&GpuCollider> = now.iter().map(|(_, u)| &**u).collect();
+    let end: Vec<&GpuCollider> = now.iter().map(|(_, u)| &**u).collect();
     let gm = g
         .cloth
-        .step_frame(g.gpu, &start, &end_refs, ctx.frame, 1.0 / ctx.fps)?;
+        .step_frame(g.gpu, &start, &end, ctx.frame, 1.0 / ctx.fps)?;
     g.previous = now;
-    let fields: Vec<&DistanceField> = end.iter().map(|f| &**f).collect();
-    let m = sim.adopt_gpu_frame(
-        g.cloth.read_state(g.gpu)?,
-        g.cloth.read_side(g.gpu)?,
-        &fields,
-        &gm,
-    )?;
+    let m =
+        sim.adopt_gpu_frame_resident(g.cloth.read_state(g.gpu)?, g.cloth.read_side(g.gpu)?, &gm)?;
     Ok(serde_json::to_value(m).expect("plain data"))
 }

@@ -158,9 +158,8 @@ impl Stage for GroundStage {
         let meshes = ctx.values.meshes(&self.objects)?;
         let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
         let stepped = match &mut self.path {
-            Path::Gpu(gpu, r, g) => g.step_with(gpu, &refs, |m, cam, w, h, o| {
-                r.depth_map(gpu, m, cam, w, h, o)
-            }),
+            // The contact view stays on the GPU, where the passes read it.
+            Path::Gpu(gpu, r, g) => g.step_resident(gpu, r, &refs),
             Path::Raster(gpu, r) => self
                 .sim
                 .step_with(&refs, |m, cam, w, h, o| r.depth_map(gpu, m, cam, w, h, o)),

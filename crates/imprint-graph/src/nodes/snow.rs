@@ -139,7 +139,8 @@ impl Stage for SnowStage {
         let refs: Vec<&Mesh> = ms.iter().map(|m| &**m).collect();
         let dt = 1.0 / ctx.fps;
         let step = match &mut self.gpu {
-            // Depth maps, look-ups and slides on the GPU; the deposit on the CPU.
+            // Depth maps (never read back), look-ups and slides on the GPU; the deposit on
+            // the CPU.
             Some((gpu, r)) => {
                 let gpu: &GpuContext = gpu;
                 let mut look_ups = GpuSnowArrival::new();
@@ -147,16 +148,7 @@ impl Stage for SnowStage {
                     &refs,
                     self.ground.as_ref(),
                     dt,
-                    |occluder, receivers, directions, params| {
-                        look_ups.arrival_with(
-                            gpu,
-                            occluder,
-                            receivers,
-                            directions,
-                            params,
-                            |m, cam, w, h, o| r.depth_map(gpu, m, cam, w, h, o),
-                        )
-                    },
+                    look_ups.resident(gpu, r),
                     self.gpu_relax.relaxer(gpu),
                 )
             }

@@ -174,6 +174,13 @@ pub struct ClothSim {
     stats: Vec<SubstepStats>,
     dt_prev: Option<f32>,
     first_energy: Option<f64>,
+    /// The kinetic energy of the last substep as a GPU cloth measured it, when the last
+    /// frame was a GPU frame taken in by `adopt_gpu_frame*` (None after a CPU frame or
+    /// [`ClothSim::set_positions`]): what a [`GpuCloth`] made from this sim limits its next
+    /// frame's energy growth by.
+    ///
+    /// [`GpuCloth`]: super::gpu::GpuCloth
+    gpu_kinetic: Option<f64>,
     stability: StabilityEstimate,
     /// Diagonal of the rest shape's bounding box (for the energy scale).
     extent: f32,
@@ -281,6 +288,7 @@ impl ClothSim {
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
             dt_prev: None,
             first_energy: None,
+            gpu_kinetic: None,
             stability,
             extent: (hi - lo).length(),
             shape,
@@ -337,6 +345,49 @@ impl ClothSim {
         &self.stability
     }
 
+    /// The node name used in errors (see [`ClothSim::with_name`]).
+    pub fn name(&self) -> &str {
+        &self.node
+    }
+
+    /// The pins' targets at the start and at the end of the next frame (one per
+    /// [`ClothSim::pinned`] particle): after a frame both are where it left the pins, until
+    /// [`ClothSim::set_pin_targets`] moves the end.
+    pub fn pin_endpoints(&self) -> (&[Vec3], &[Vec3]) {
+        (&self.pin_from, &self.pin_to)
+    }
+
+    /// The contacts' side memory (per particle, one entry per collider of the last frame,
+    /// at least one) and the number of colliders it is laid out for (0 before any frame).
+    pub fn side_memory(&self) -> (&[Vec4], usize) {
+        (&self.side, self.side_fields)
+    }
+
+    /// The last substep's length, s (None before the first frame): the next substep scales
+    /// the Verlet velocity term by dt / this when its own dt differs.
+    pub fn dt_prev(&self) -> Option<f32> {
+        self.dt_prev
+    }
+
+    /// The kinetic energy of the last substep as the GPU cloth measures it, J: ½ m Σ |x −
+    /// x_prev|² / dt² over the free particles, each square in f32 and the sum in f64. After
+    /// a GPU frame taken in by [`ClothSim::adopt_gpu_frame`] or
+    /// [`ClothSim::adopt_gpu_frame_resident`] it is the GPU's own figure (to the bit);
+    /// otherwise it is computed here from the state (0 before the first frame).
+    pub fn last_substep_kinetic(&self) -> f64 {
+        if let Some(ke) = self.gpu_kinetic {
+            return ke;
+        }
+        let Some(dt) = self.dt_prev else { return 0.0 };
+        let mut step2 = 0.0f64;
+        for (p, q) in self.state.pos.iter().zip(&self.state.prev) {
+            if p.w > 0.0 {
+                step2 += (*p - *q).truncate().length_squared() as f64;
+            }
+        }
+        step2 * 0.5 * self.params.mass as f64 / (dt as f64 * dt as f64)
+    }
+
     /// Places the cloth at `positions`, at rest (previous = current), and makes the pinned
     /// particles' targets their new positions.
     pub fn set_positions(&mut self, positions: &[Vec3]) -> Result<()> {
@@ -362,6 +413,7 @@ impl ClothSim {
         }
         self.side.fill(Vec4::ZERO);
         self.first_energy = None;
+        self.gpu_kinetic = None;
         Ok(())
     }
 
@@ -529,6 +581,7 @@ impl ClothSim {
         for (k, to) in self.pin_to.iter().enumerate() {
             self.pin_from[k] = *to;
         }
+        self.gpu_kinetic = None;
         Ok(self.metrics(frame, dt, colliders, depth, &frame_stats, &last))
     }
 
@@ -768,7 +821,12 @@ impl ClothSim {
     /// counts what the CPU measures after a frame (strain, particles left closer than ε to
     /// `fields_end`, energies and their drift), so that both paths report the same
     /// [`ClothFrameMetrics`]. The simulator then holds the GPU's state ([`ClothSim::to_mesh`]
-    /// gives the GPU cloth's mesh).
+    /// gives the GPU cloth's mesh) and all else the GPU cloth carries into its next frame:
+    /// the side memory, the last substep's dt and kinetic energy (`gpu.kinetic`), and the
+    /// pins' start (their targets, as the GPU cloth moves them; a caller that moves pins
+    /// sets the same targets on this sim as on the GPU cloth). So a checkpoint of this sim
+    /// restores the GPU cloth exactly: `GpuCloth::new(ctx, &sim)` steps on to the same
+    /// bits as the GPU cloth that never stopped.
     pub fn adopt_gpu_frame(
         &mut self,
         state: ClothState,
@@ -790,6 +848,10 @@ impl ClothSim {
         self.side = side;
         self.side_fields = nf;
         self.dt_prev = Some(gpu.dt_substep);
+        // What else the GPU cloth carries into its next frame: the pins start from their
+        // targets, and the energy limit rests on the last substep's kinetic energy.
+        self.pin_from.clone_from(&self.pin_to);
+        self.gpu_kinetic = Some(gpu.kinetic);
         let colliders: Vec<Collider> = fields_end
             .iter()
             .map(|&f| Collider {
@@ -838,6 +900,10 @@ impl ClothSim {
         self.side = side;
         self.side_fields = nf;
         self.dt_prev = Some(gpu.dt_substep);
+        // What else the GPU cloth carries into its next frame: the pins start from their
+        // targets, and the energy limit rests on the last substep's kinetic energy.
+        self.pin_from.clone_from(&self.pin_to);
+        self.gpu_kinetic = Some(gpu.kinetic);
         let stats = SubstepStats {
             contacts: gpu.contacts,
             inside: gpu.inside,

@@ -324,9 +324,13 @@ pub struct GpuCloth {
 }
 
 impl GpuCloth {
-    /// Uploads `sim`'s cloth (its current state, links, faces and pins) to the GPU. The pins'
-    /// targets start where the pinned particles are (set them with
-    /// [`GpuCloth::set_pin_targets`]); the side memory of the contacts starts empty.
+    /// Uploads `sim`'s cloth (links, faces, pins) and everything it carries between frames:
+    /// its state, the contacts' side memory, the pins' start and end targets (move the end
+    /// with [`GpuCloth::set_pin_targets`]), the last substep's dt and kinetic energy
+    /// ([`ClothSim::last_substep_kinetic`], the energy-growth limit's base) and its name. A
+    /// sim that mirrored a GPU cloth (`ClothSim::adopt_gpu_frame*` after each frame), or was
+    /// loaded from a checkpoint of one, gives a GPU cloth that steps on to the same bits as
+    /// that one.
     pub fn new(ctx: &GpuContext, sim: &ClothSim) -> Result<Self> {
         let params = sim.params().clone();
         let n = sim.len();
@@ -355,10 +359,14 @@ impl GpuCloth {
         let href_base = topo.len() as u32;
         topo.extend_from_slice(&hinges.refs);
         let state = sim.state();
-        let pin_from: Vec<Vec3> = pinned
-            .iter()
-            .map(|&p| state.pos[p as usize].truncate())
-            .collect();
+        let (pin_from, pin_to) = sim.pin_endpoints();
+        let (side, side_fields) = sim.side_memory();
+        if side.len() != n * side_fields.max(1) {
+            return Err(Error::Invalid(format!(
+                "cloth: {} side entries for {n} particles and {side_fields} colliders",
+                side.len()
+            )));
+        }
         let quads: &[LinkQuad] = &links.quads;
         let face_others: Vec<[u32; 2]> = faces.others.clone();
         let bytes = n as u64 * 16;
@@ -368,7 +376,7 @@ impl GpuCloth {
             ctx.storage_buffer("cloth next", &state.pos)?,
         ];
         Ok(GpuCloth {
-            node: "cloth".into(),
+            node: sim.name().to_string(),
             stability: *sim.stability(),
             law: links.law,
             n: n as u32,
@@ -392,21 +400,19 @@ impl GpuCloth {
                 ctx.zeroed_buffer("cloth backup pos", bytes)?,
                 ctx.zeroed_buffer("cloth backup prev", bytes)?,
             ],
-            side: ctx.zeroed_buffer("cloth side", bytes)?,
-            side_backup: ctx.zeroed_buffer("cloth side backup", bytes)?,
-            side_fields: 0,
+            side: ctx.storage_buffer("cloth side", side)?,
+            side_backup: ctx.zeroed_buffer("cloth side backup", side.len() as u64 * 16)?,
+            side_fields,
             stats: ctx.zeroed_buffer(
                 "cloth stats",
                 n as u64 * std::mem::size_of::<Stats>() as u64,
             )?,
             fields: None,
             step_params: Vec::new(),
-            dt_prev: None,
-            // The sim's last dt is not known here: the first frame's limit rests on the energy
-            // scale alone.
-            ke_last: 0.0,
-            pin_to: pin_from.clone(),
-            pin_from,
+            dt_prev: sim.dt_prev(),
+            ke_last: sim.last_substep_kinetic(),
+            pin_from: pin_from.to_vec(),
+            pin_to: pin_to.to_vec(),
             pinned,
             faces,
             shape,

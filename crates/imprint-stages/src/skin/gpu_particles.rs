@@ -27,8 +27,10 @@
 //!
 //! Supported: every force and vertex rule of the CPU path ([`Spring::Distance`] and
 //! [`Spring::Corotated`], with or without pressure; both [`VertexRotation`]s). Not here: the
-//! frame metrics, and the state going back into the CPU's [`ParticleSkin`] (the GPU copy runs
-//! on its own from the state it was made from). The blow-up check reports the lowest failing
+//! frame metrics. The GPU copy runs on its own from the state it was made from;
+//! [`GpuParticleSkin::read_into`] takes its state back into a [`ParticleSkin`] (for a
+//! checkpoint: `GpuParticleSkin::new` of that skin steps on to the same bits as the GPU copy
+//! that never stopped). The blow-up check reports the lowest failing
 //! particle over the frame and the first failing substep (the CPU: the first substep's
 //! lowest), without the distance.
 //!
@@ -45,7 +47,7 @@
 //! 16 per pair, 64 per bone and substep, 80 + 16 per vertex.
 
 use super::particles::{ParticleSkin, Spring, VertexRotation};
-use glam::{Affine3A, Quat, Vec3, Vec3A};
+use glam::{Affine3A, Mat3A, Quat, Vec3, Vec3A};
 use imprint_core::{Error, Result};
 use imprint_gpu::{GpuContext, compute_pass, shader};
 
@@ -126,6 +128,8 @@ pub struct GpuParticleSkin {
     params: Params,
     params_buffer: wgpu::Buffer,
     state: wgpu::Buffer,
+    /// Per particle [`Rot`]: tracked rotation, half its matrix, volume change.
+    rots: wgpu::Buffer,
     tfs: wgpu::Buffer,
     bad: wgpu::Buffer,
     pairs: (wgpu::ComputePipeline, wgpu::BindGroup),
@@ -319,10 +323,10 @@ impl GpuParticleSkin {
         ctx.queue
             .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
         let tie_buffer = ctx.storage_buffer("particles vertex ties", &ties)?;
-        let bone_q = ctx.storage_buffer(
-            "particles bone rotations",
-            &vec![[0.0f32, 0.0, 0.0, 1.0]; bones],
-        )?;
+        // The bones' rotations at the last frame's end, as the skin has them (the vertices
+        // before the first GPU frame turn offsets by these).
+        let bone_rot: Vec<[f32; 4]> = skin.bone_rotations().iter().map(|q| q.to_array()).collect();
+        let bone_q = ctx.storage_buffer("particles bone rotations", &bone_rot)?;
         let prot = ctx.zeroed_buffer("particles vertex rotations", 16 * n as u64)?;
         let verts = ctx.zeroed_buffer("particles vertices", 16 * ties.len() as u64)?;
         let vertex_passes = [("particle_rotations", 0), ("vertices", 1)].map(|(entry, k)| {
@@ -363,6 +367,7 @@ impl GpuParticleSkin {
             params,
             params_buffer,
             state,
+            rots: rot_buffer,
             tfs,
             bad,
             pairs: (pairs_pipeline, pairs_bind),
@@ -511,6 +516,53 @@ impl GpuParticleSkin {
             .take(self.params.verts as usize)
             .map(|p| Vec3::new(p[0], p[1], p[2]))
             .collect())
+    }
+
+    /// Reads the GPU's particle state back into `skin` (the skin it was made from, or a copy
+    /// of it): positions, half-step velocities, estimated step velocities, tracked
+    /// rotations (and half their matrices), volume changes, and the bones' rotations at the
+    /// last frame's end — everything the GPU carries from one frame to the next. Then
+    /// `skin` is where this GPU skin is: [`ParticleSkin::positions`] and
+    /// [`ParticleSkin::vertices`] give its state (to the CPU's rounding for the vertices),
+    /// a checkpoint of it restores this GPU skin, and `GpuParticleSkin::new(ctx, &skin)`
+    /// steps on to the same bits as this one. Waits for the GPU (three read-backs: 48 + 64
+    /// bytes per particle, 16 per bone).
+    pub fn read_into(&self, ctx: &GpuContext, skin: &mut ParticleSkin) -> Result<()> {
+        let n = self.n as usize;
+        let verts = skin.gpu_vertex_ties().0.len();
+        if skin.gpu_state().0.len() != n
+            || skin.gpu_bone_count() != self.bones
+            || verts != self.params.verts as usize
+        {
+            return Err(Error::Invalid(format!(
+                "GPU particle skinning: a GPU skin of {n} particles, {} bones and {} vertices \
+                 cannot be read into a skin of {} particles, {} bones and {verts} vertices",
+                self.bones,
+                self.params.verts,
+                skin.gpu_state().0.len(),
+                skin.gpu_bone_count(),
+            )));
+        }
+        let states: Vec<State> = ctx.read_buffer(&self.state)?;
+        let rots: Vec<Rot> = ctx.read_buffer(&self.rots)?;
+        let bone_q: Vec<[f32; 4]> = ctx.read_buffer(&self.bone_q)?;
+        let a3 = |v: [f32; 4]| Vec3A::new(v[0], v[1], v[2]);
+        let (x, xa, v, ve, rot, half_rot, jac, bone_rot) = skin.gpu_state_mut();
+        for (i, st) in states.iter().take(n).enumerate() {
+            xa[i] = a3(st.x);
+            x[i] = xa[i].into();
+            v[i] = a3(st.v);
+            ve[i] = a3(st.ve);
+        }
+        for (i, r) in rots.iter().take(n).enumerate() {
+            rot[i] = Quat::from_array(r.q);
+            half_rot[i] = Mat3A::from_cols(a3(r.hx), a3(r.hy), a3(r.hz));
+            jac[i] = r.hx[3];
+        }
+        for (b, q) in bone_rot.iter_mut().zip(&bone_q) {
+            *b = Quat::from_array(*q);
+        }
+        Ok(())
     }
 
     /// The particles' positions (waits for the GPU).

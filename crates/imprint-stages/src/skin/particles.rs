@@ -804,6 +804,13 @@ impl ParticleSkin {
         &self.bone
     }
 
+    /// The bones' rotations at the last frame's end (identity before the first frame): what
+    /// [`VertexRotation::Bone`] turns vertex offsets by, and where
+    /// [`Spring::Distance`]'s vertex rotations start.
+    pub fn bone_rotations(&self) -> &[Quat] {
+        &self.bone_rot
+    }
+
     /// Neighbour pairs (each counted from both ends).
     pub fn neighbour_count(&self) -> usize {
         self.nbr.len()
@@ -844,6 +851,35 @@ impl ParticleSkin {
     /// For the GPU path: the number of bones.
     pub(crate) fn gpu_bone_count(&self) -> usize {
         self.bones
+    }
+
+    /// For the GPU path, to take a GPU skin's state back: the positions (as of the frame's
+    /// end and as the substeps move them), half-step velocities, estimated velocities, each
+    /// particle's tracked rotation, half its rotation matrix and its volume change, and the
+    /// bones' rotations at the last frame's end.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn gpu_state_mut(
+        &mut self,
+    ) -> (
+        &mut [Vec3],
+        &mut [Vec3A],
+        &mut [Vec3A],
+        &mut [Vec3A],
+        &mut [Quat],
+        &mut [Mat3A],
+        &mut [f32],
+        &mut [Quat],
+    ) {
+        (
+            &mut self.x,
+            &mut self.xa,
+            &mut self.v,
+            &mut self.ve,
+            &mut self.rot,
+            &mut self.half_rot,
+            &mut self.jac,
+            &mut self.bone_rot,
+        )
     }
 
     /// For the GPU path: per vertex its 4 particles and the rest offsets from them.
