@@ -20,6 +20,24 @@ fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
     v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
 }
 
+/// Asserts `got` equals `want` to the bit; on failure says how many differ and by how much.
+fn assert_bits(got: &[Vec3], want: &[Vec3], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: lengths");
+    let (a, b) = (bits(got), bits(want));
+    if a != b {
+        let n = a.iter().zip(&b).filter(|(p, q)| p != q).count();
+        let d = max_dist(got, want);
+        panic!("{what}: {n} of {} differ, by up to {d:.3e}", got.len());
+    }
+}
+
+fn max_dist(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0, f32::max)
+}
+
 /// Frame lengths alternate, so that the first substep after the checkpoint rescales the
 /// Verlet velocity by dt / the last substep's dt (the sim's `dt_prev`).
 fn cloth_dt(frame: u32) -> f32 {
@@ -118,16 +136,19 @@ fn gpu_cloth_restored_from_its_mirror_steps_on_bit_for_bit() {
     let bytes = postcard::to_allocvec(&mirror).unwrap();
     let loaded: ClothSim = postcard::from_bytes(&bytes).unwrap();
     assert_eq!(loaded.name(), "draped");
-    assert_eq!(
-        bits(&loaded.positions()),
-        bits(&g.read_positions(ctx).unwrap())
+    assert_bits(
+        &loaded.positions(),
+        &g.read_positions(ctx).unwrap(),
+        "the checkpoint's positions",
     );
     let mut restored = GpuCloth::new(ctx, &loaded).unwrap();
-    assert_eq!(
-        restored.read_side(ctx).unwrap(),
-        g.read_side(ctx).unwrap(),
-        "side memory"
-    );
+    let side_bits = |g: &GpuCloth| -> Vec<[u32; 4]> {
+        let side = g.read_side(ctx).unwrap();
+        side.iter()
+            .map(|v| v.to_array().map(f32::to_bits))
+            .collect()
+    };
+    let same_side = side_bits(&restored) == side_bits(&g);
     for f in K..K + M {
         if f > K {
             let t = pin_targets(&mirror, &rest, f);
@@ -140,10 +161,11 @@ fn gpu_cloth_restored_from_its_mirror_steps_on_bit_for_bit() {
             g.read_positions(ctx).unwrap(),
             restored.read_positions(ctx).unwrap(),
         );
-        let same = bits(&xa) == bits(&xb);
         eprintln!(
-            "frame {f}: contacts {}, inside {}, restored the same: {same}",
-            a.contacts, a.inside
+            "frame {f}: contacts {}, inside {}, restored differs by {:.3e}",
+            a.contacts,
+            a.inside,
+            max_dist(&xb, &xa)
         );
         if f == K {
             assert!(
@@ -151,12 +173,14 @@ fn gpu_cloth_restored_from_its_mirror_steps_on_bit_for_bit() {
                 "no particle crossed in the frame after the checkpoint"
             );
         }
-        assert!(
-            same,
-            "frame {f}: the restored GPU cloth left the uninterrupted one"
-        );
+        assert_bits(&xb, &xa, &format!("frame {f}: restored vs uninterrupted"));
         assert_eq!(a, b, "frame {f}: metrics");
     }
+    // Checked last, so that a restore without it shows what it changes first.
+    assert!(
+        same_side,
+        "the restored cloth's side memory at the checkpoint"
+    );
 }
 
 fn coarse(params: ParticleParams) -> ParticleParams {
@@ -203,22 +227,20 @@ fn gpu_particle_skin_restored_from_read_into_steps_on_bit_for_bit() {
             g.step_frame(ctx, &pose(f), &pose(f + 1), f, DT).unwrap();
         }
         g.read_into(ctx, &mut cpu).unwrap();
-        assert_eq!(
-            bits(cpu.positions()),
-            bits(&g.read_positions(ctx).unwrap()),
-            "{name}: positions read back"
+        assert_bits(
+            cpu.positions(),
+            &g.read_positions(ctx).unwrap(),
+            &format!("{name}: positions read back"),
         );
         let bytes = postcard::to_allocvec(&cpu).unwrap();
         let loaded: ParticleSkin = postcard::from_bytes(&bytes).unwrap();
         let mut restored = GpuParticleSkin::new(ctx, &loaded).unwrap();
         let (va, vb) = (g.vertices(ctx).unwrap(), restored.vertices(ctx).unwrap());
-        let d = va
-            .iter()
-            .zip(&vb)
-            .map(|(a, b)| a.distance(*b))
-            .fold(0.0, f32::max);
-        eprintln!("{name}: vertices before the restored skin's first frame differ by {d:.2e}");
-        assert_eq!(bits(&va), bits(&vb), "{name}: vertices at the checkpoint");
+        eprintln!(
+            "{name}: vertices before the restored skin's first frame differ by {:.2e}",
+            max_dist(&vb, &va)
+        );
+        assert_bits(&vb, &va, &format!("{name}: vertices at the checkpoint"));
         for f in K..K + M {
             g.step_frame(ctx, &pose(f), &pose(f + 1), f, DT).unwrap();
             restored
@@ -229,14 +251,13 @@ fn gpu_particle_skin_restored_from_read_into_steps_on_bit_for_bit() {
                 restored.read_positions(ctx).unwrap(),
             );
             let (va, vb) = (g.vertices(ctx).unwrap(), restored.vertices(ctx).unwrap());
-            let d = xa
-                .iter()
-                .zip(&xb)
-                .map(|(a, b)| a.distance(*b))
-                .fold(0.0, f32::max);
-            eprintln!("{name}, frame {f}: particles differ by {d:.2e}");
-            assert_eq!(bits(&xa), bits(&xb), "{name}, frame {f}: particles");
-            assert_eq!(bits(&va), bits(&vb), "{name}, frame {f}: vertices");
+            eprintln!(
+                "{name}, frame {f}: particles differ by {:.2e}, vertices by {:.2e}",
+                max_dist(&xb, &xa),
+                max_dist(&vb, &va)
+            );
+            assert_bits(&xb, &xa, &format!("{name}, frame {f}: particles"));
+            assert_bits(&vb, &va, &format!("{name}, frame {f}: vertices"));
         }
     }
 }

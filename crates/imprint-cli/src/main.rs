@@ -523,21 +523,6 @@ fn describe(plan: &Plan) -> String {
             }
         );
     }
-    // Explicit integrators have a largest stable step: say so before anything runs.
-    for name in &plan.order {
-        if let imprint_graph::schema::NodeSpec::Cloth(c) = &plan.file.nodes[name] {
-            let warning =
-                imprint_stages::cloth::ClothSim::new(&c.params, &plan.base_dir).map(|sim| {
-                    sim.stability()
-                        .warning(c.params.substeps, 1.0 / plan.file.fps)
-                });
-            match warning {
-                Ok(Some(w)) => s += &format!("\nwarning: node '{name}': {w}\n"),
-                Ok(None) => {}
-                Err(e) => s += &format!("\nwarning: node '{name}': {e}\n"),
-            }
-        }
-    }
     s += &format!(
         "\nschedule (first {} frames):\n{}",
         plan.file.frames.min(24),

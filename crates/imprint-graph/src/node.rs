@@ -114,6 +114,11 @@ pub trait Node: Any {
     }
     /// Value ranges and assets, checked before anything runs.
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()>;
+    /// What the user should know before running (after `check` passed): e.g. a substep
+    /// beyond the estimated stable one.
+    fn warnings(&self, _ctx: &CheckCtx<'_>) -> Vec<String> {
+        Vec::new()
+    }
     /// The object that runs the node.
     fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>>;
     fn as_any(&self) -> &dyn Any;

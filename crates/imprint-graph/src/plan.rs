@@ -50,36 +50,55 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Plan> {
 
 /// Validates pipeline text (`source.name` is used in messages).
 pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
+    let file = read_file(&source)?;
+    let (graph, order) = typed_graph(&source, &file)?;
+    let mut warnings = check_nodes(&source, &file, base_dir)?;
+    let topo: Vec<String> = order.iter().map(|&n| graph[n].to_string()).collect();
+    let (run_order, pruned, pruning) = prune(&file, &graph, &order);
+    warnings.extend(pruning);
+    Ok(Plan {
+        source,
+        file,
+        base_dir: base_dir.to_path_buf(),
+        order: run_order,
+        topo,
+        pruned,
+        warnings,
+    })
+}
+
+/// The file's RON and its run-wide values.
+fn read_file(source: &Source) -> Result<PipelineFile> {
     let file: PipelineFile = ron::Options::default()
         .with_default_extension(
             ron::extensions::Extensions::IMPLICIT_SOME
                 | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
         )
         .from_str(&source.text)
-        .map_err(|e| ron_error(&source, &e))?;
+        .map_err(|e| ron_error(source, &e))?;
     let whole = 0..source.text.len().min(8);
+    let fail = |msg: String| -> Error { source.error(whole.clone(), msg, "here", None).into() };
     if file.frames == 0 {
-        return Err(source
-            .error(whole, "frames must be at least 1", "here", None)
-            .into());
+        return Err(fail("frames must be at least 1".into()));
     }
     if !(file.fps.is_finite() && file.fps > 0.0) {
-        return Err(source
-            .error(
-                whole,
-                format!("fps must be a finite number > 0, got {}", file.fps),
-                "here",
-                None,
-            )
-            .into());
+        return Err(fail(format!(
+            "fps must be a finite number > 0, got {}",
+            file.fps
+        )));
     }
     if file.nodes.is_empty() {
-        return Err(source
-            .error(whole, "the pipeline has no nodes", "here", None)
-            .into());
+        return Err(fail("the pipeline has no nodes".into()));
     }
+    Ok(file)
+}
 
-    // Typed edges.
+/// The graph of every input edge (each names a node of the file) and the nodes in
+/// dependency order (the graph has no cycle).
+fn typed_graph<'a>(
+    source: &Source,
+    file: &'a PipelineFile,
+) -> Result<(DiGraph<&'a str, ()>, Vec<NodeIndex>)> {
     let names: Vec<&String> = file.nodes.keys().collect();
     let mut graph = DiGraph::<&str, ()>::new();
     let idx: BTreeMap<&str, NodeIndex> = names
@@ -108,34 +127,32 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             graph.add_edge(idx[input], idx[name.as_str()], ());
         }
     }
+    let order = toposort(&graph, None).map_err(|cycle| {
+        let start = graph[cycle.node_id()];
+        let members = kosaraju_scc(&graph)
+            .into_iter()
+            .find(|scc| scc.contains(&cycle.node_id()))
+            .unwrap_or_default();
+        let mut in_cycle: Vec<&str> = members.iter().map(|&i| graph[i]).collect();
+        in_cycle.sort();
+        Error::from(source.error(
+            source.node_span(start),
+            format!(
+                "the graph has a cycle through nodes: {}",
+                in_cycle.join(" -> ")
+            ),
+            "part of a cycle",
+            Some("a node cannot depend on its own output; remove one of these inputs".into()),
+        ))
+    })?;
+    Ok((graph, order))
+}
 
-    let order = match toposort(&graph, None) {
-        Ok(order) => order,
-        Err(cycle) => {
-            let start = graph[cycle.node_id()];
-            let members = kosaraju_scc(&graph)
-                .into_iter()
-                .find(|scc| scc.contains(&cycle.node_id()))
-                .unwrap_or_default();
-            let mut in_cycle: Vec<&str> = members.iter().map(|&i| graph[i]).collect();
-            in_cycle.sort();
-            return Err(source
-                .error(
-                    source.node_span(start),
-                    format!(
-                        "the graph has a cycle through nodes: {}",
-                        in_cycle.join(" -> ")
-                    ),
-                    "part of a cycle",
-                    Some(
-                        "a node cannot depend on its own output; remove one of these inputs".into(),
-                    ),
-                )
-                .into());
-        }
-    };
-
+/// Every edge's type, every node's values (its module's checks) and schedule; returns what
+/// the nodes warn about.
+fn check_nodes(source: &Source, file: &PipelineFile, base_dir: &Path) -> Result<Vec<String>> {
     let lookup = |n: &str| file.nodes.get(n).map(|s| s.node());
+    let mut warnings = Vec::new();
     for (name, node) in &file.nodes {
         for p in node.inputs() {
             let (port, input, expected) = (p.port, p.node, p.ty);
@@ -152,23 +169,35 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
                             producer.kind()
                         ),
                         format!("expects a {expected}"),
-                        Some(producers_of(expected, &file)),
+                        Some(producers_of(expected, file)),
                     )
                     .into());
             }
         }
-        node.node().check(&CheckCtx {
-            source: &source,
+        let ctx = CheckCtx {
+            source,
             name,
             base_dir,
             fps: file.fps,
             frames: file.frames,
             lookup: &lookup,
-        })?;
-        check_schedule(&source, name, &file)?;
+        };
+        node.node().check(&ctx)?;
+        check_schedule(source, name, file)?;
+        let said = node.node().warnings(&ctx);
+        warnings.extend(said.into_iter().map(|w| format!("node '{name}': {w}")));
     }
+    Ok(warnings)
+}
 
-    // Prune what reaches no writer.
+/// What runs (in dependency order), what is pruned and why, and what to warn about: nodes
+/// that reach no writer, nodes switched off (and what reads them), and the mesh and
+/// boundary read ahead of time by an interpolated field only.
+fn prune(
+    file: &PipelineFile,
+    graph: &DiGraph<&str, ()>,
+    order: &[NodeIndex],
+) -> (Vec<String>, Vec<(String, String)>, Vec<String>) {
     let writers: Vec<NodeIndex> = graph
         .node_indices()
         .filter(|&i| file.nodes[graph[i]].is_writer())
@@ -180,51 +209,13 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             stack.extend(graph.neighbors_directed(n, petgraph::Direction::Incoming));
         }
     }
-    // Switched off: `enabled: false` and everything downstream of it.
-    let mut off: BTreeMap<NodeIndex, String> = BTreeMap::new();
-    let mut warnings = Vec::new();
-    for &n in &order {
-        let name = graph[n];
-        if !file.nodes[name].enabled() {
-            off.insert(n, "disabled (enabled: false)".into());
-        } else if let Some(up) = graph
-            .neighbors_directed(n, petgraph::Direction::Incoming)
-            .find(|u| off.contains_key(u))
-        {
-            off.insert(n, format!("reads '{}', which is switched off", graph[up]));
-            if file.nodes[name].is_writer() && needed.contains(&n) {
-                warnings.push(format!(
-                    "writer '{name}' loses its input '{}' (switched off), so it writes nothing",
-                    graph[up]
-                ));
-            }
-        }
-    }
-    // Read ahead of time only: the mesh and boundary behind an interpolated field, when no
-    // other running node reads them (the field evaluates them itself, at later times).
-    let mut ahead: BTreeMap<NodeIndex, String> = BTreeMap::new();
-    for &n in order.iter().rev() {
-        let runs = |m: &NodeIndex| needed.contains(m) && !off.contains_key(m);
-        if !runs(&n) || file.nodes[graph[n]].is_writer() {
-            continue;
-        }
-        let consumers: Vec<NodeIndex> = graph
-            .neighbors_directed(n, petgraph::Direction::Outgoing)
-            .filter(runs)
-            .collect();
-        let reader = |c: &NodeIndex| match &file.nodes[graph[*c]] {
-            node if node.schedule().interpolate => Some(graph[*c].to_string()),
-            _ => ahead.get(c).cloned(),
-        };
-        let readers: Option<Vec<String>> = consumers.iter().map(reader).collect();
-        if let Some(r) = readers.filter(|r| !r.is_empty()) {
-            ahead.insert(n, r[0].clone());
-        }
-    }
-    let topo: Vec<String> = order.iter().map(|&n| graph[n].to_string()).collect();
+    let (off, warnings) = switched_off(file, graph, order, &needed);
+    let ahead = read_ahead(file, graph, order, |m| {
+        needed.contains(m) && !off.contains_key(m)
+    });
     let mut run_order = Vec::new();
     let mut pruned = Vec::new();
-    for n in order {
+    for &n in order {
         let name = graph[n].to_string();
         if let Some(why) = off.get(&n) {
             pruned.push((name, why.clone()));
@@ -244,15 +235,67 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
             pruned.push((name, reason));
         }
     }
-    Ok(Plan {
-        source,
-        file,
-        base_dir: base_dir.to_path_buf(),
-        order: run_order,
-        topo,
-        pruned,
-        warnings,
-    })
+    (run_order, pruned, warnings)
+}
+
+/// Switched off: `enabled: false` and everything downstream of it; a writer that loses its
+/// input is warned about.
+fn switched_off(
+    file: &PipelineFile,
+    graph: &DiGraph<&str, ()>,
+    order: &[NodeIndex],
+    needed: &BTreeSet<NodeIndex>,
+) -> (BTreeMap<NodeIndex, String>, Vec<String>) {
+    let mut off: BTreeMap<NodeIndex, String> = BTreeMap::new();
+    let mut warnings = Vec::new();
+    for &n in order {
+        let name = graph[n];
+        if !file.nodes[name].enabled() {
+            off.insert(n, "disabled (enabled: false)".into());
+        } else if let Some(up) = graph
+            .neighbors_directed(n, petgraph::Direction::Incoming)
+            .find(|u| off.contains_key(u))
+        {
+            off.insert(n, format!("reads '{}', which is switched off", graph[up]));
+            if file.nodes[name].is_writer() && needed.contains(&n) {
+                warnings.push(format!(
+                    "writer '{name}' loses its input '{}' (switched off), so it writes nothing",
+                    graph[up]
+                ));
+            }
+        }
+    }
+    (off, warnings)
+}
+
+/// Read ahead of time only: the mesh and boundary behind an interpolated field, when no other
+/// running node reads them (the field evaluates them itself, at later times). By node: the
+/// field that reads it.
+fn read_ahead(
+    file: &PipelineFile,
+    graph: &DiGraph<&str, ()>,
+    order: &[NodeIndex],
+    runs: impl Fn(&NodeIndex) -> bool,
+) -> BTreeMap<NodeIndex, String> {
+    let mut ahead: BTreeMap<NodeIndex, String> = BTreeMap::new();
+    for &n in order.iter().rev() {
+        if !runs(&n) || file.nodes[graph[n]].is_writer() {
+            continue;
+        }
+        let consumers: Vec<NodeIndex> = graph
+            .neighbors_directed(n, petgraph::Direction::Outgoing)
+            .filter(|c| runs(c))
+            .collect();
+        let reader = |c: &NodeIndex| match &file.nodes[graph[*c]] {
+            node if node.schedule().interpolate => Some(graph[*c].to_string()),
+            _ => ahead.get(c).cloned(),
+        };
+        let readers: Option<Vec<String>> = consumers.iter().map(reader).collect();
+        if let Some(r) = readers.filter(|r| !r.is_empty()) {
+            ahead.insert(n, r[0].clone());
+        }
+    }
+    ahead
 }
 
 /// `every`, `offset` and `split` (see [`crate::schedule`]); a field's `interpolate` is

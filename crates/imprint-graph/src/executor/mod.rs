@@ -7,12 +7,13 @@
 //! earlier waves published, and the executor applies a wave's results in plan order.
 
 mod checkpoint;
+mod options;
 mod reload;
 mod wave;
 
 pub use checkpoint::{CHECKPOINT_FILE, Checkpoint, checkpoint_path};
+pub use options::{Observed, Observer, RunOptions};
 
-use crate::exec::{Observed, Observer, RunOptions};
 use crate::node::{BuildCtx, CheckCtx, Stage};
 use crate::plan::Plan;
 use crate::report::{NodeReport, Report};

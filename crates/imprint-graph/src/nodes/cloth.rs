@@ -97,17 +97,20 @@ impl Node for ClothNode {
         }
         Ok(())
     }
+    /// Explicit integrators have a largest stable step: said before anything runs.
+    fn warnings(&self, ctx: &CheckCtx<'_>) -> Vec<String> {
+        let sim = ClothSim::new(&self.params, ctx.base_dir);
+        let said = sim.map(|s| s.stability().warning(self.params.substeps, 1.0 / ctx.fps));
+        match said {
+            Ok(w) => w.into_iter().collect(),
+            Err(e) => vec![e.to_string()],
+        }
+    }
     fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>> {
         let name = ctx.name().to_string();
         let sim = ClothSim::new(&self.params, ctx.check.base_dir)
             .map_err(|e| imprint_core::Error::Invalid(format!("node '{name}': {e}")))?
             .with_name(name.clone());
-        if let Some(w) = sim
-            .stability()
-            .warning(self.params.substeps, 1.0 / ctx.check.fps)
-        {
-            ctx.warn(w);
-        }
         let gpu = self.gpu_cloth(ctx, &sim)?;
         let mut depth = Vec::with_capacity(self.depth_colliders.len());
         for d in &self.depth_colliders {

@@ -44,6 +44,7 @@ pub mod sampler;
 pub mod shape;
 pub mod springs;
 pub mod stability;
+pub mod stress;
 pub mod texture;
 
 pub use cpu::{Body, ClothAssets, ClothSim, ClothState};
@@ -51,5 +52,6 @@ pub use metrics::{ClothFrameMetrics, Energy};
 pub use params::{
     Anisotropy, ClothParams, Collision, Limits, Material, Pin, Shape, StiffnessMode, Wind,
 };
-pub use stability::{StabilityEstimate, StressCase, StressOutcome, stress_map};
+pub use stability::StabilityEstimate;
+pub use stress::{StressCase, StressOutcome, stress_map};
 pub use texture::AnisotropyMap;
