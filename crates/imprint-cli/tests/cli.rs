@@ -2,28 +2,9 @@
 //! good runs write what they promise, and two runs write the same bytes.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn imprint(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_imprint"))
-        .args(args)
-        .current_dir(cwd)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("imprint runs")
-}
-
-/// Runs `imprint` and expects success, showing its stderr otherwise.
-fn run_ok(args: &[&str], cwd: &Path) -> Output {
-    let out = imprint(args, cwd);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+mod common;
+use common::{imprint, run_ok};
 
 /// `imprint run FILE --out OUT --backend gpu`, expecting success; false (the test skips)
 /// when there is no adapter, unless `IMPRINT_REQUIRE_GPU=1`, which makes that a failure.

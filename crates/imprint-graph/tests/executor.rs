@@ -3,24 +3,14 @@
 //! independent nodes at once with the same bytes as one after the other, on 1 or 2 threads.
 
 use imprint_core::Mesh;
-use imprint_graph::diagnostics::Source;
 use imprint_graph::exec::RunOptions;
 use imprint_graph::value::Value;
-use imprint_graph::{Executor, Plan, parse};
+use imprint_graph::{Executor, Plan};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-fn plan(frames: u32, nodes: &str) -> Plan {
-    let text = format!("Pipeline(frames: {frames}, fps: 24, backend: Cpu, nodes: {{\n{nodes}\n}})");
-    parse(
-        Source {
-            name: "test.ron".into(),
-            text,
-        },
-        Path::new("."),
-    )
-    .unwrap()
-}
+mod common;
+use common::plan;
 
 fn executor(p: &Plan, out: &Path) -> Executor {
     let opts = RunOptions {

@@ -3,25 +3,14 @@
 //! see, against the arithmetic of `imprint_graph::schedule` and exact blends.
 
 use imprint_core::DistanceField;
-use imprint_graph::diagnostics::Source;
+use imprint_graph::Plan;
 use imprint_graph::exec::{Observed, Observer, RunOptions, run, run_observed};
 use imprint_graph::report::Report;
-use imprint_graph::{Plan, parse};
 use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::Arc;
 
-fn plan(frames: u32, nodes: &str) -> Plan {
-    let text = format!("Pipeline(frames: {frames}, fps: 24, backend: Cpu, nodes: {{\n{nodes}\n}})");
-    parse(
-        Source {
-            name: "test.ron".into(),
-            text,
-        },
-        Path::new("."),
-    )
-    .unwrap()
-}
+mod common;
+use common::plan;
 
 fn run_plan(p: &Plan) -> Report {
     let dir = tempfile::tempdir().unwrap();

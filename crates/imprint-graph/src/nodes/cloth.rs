@@ -250,7 +250,7 @@ impl Stage for ClothStage {
         }
         match &mut self.gpu {
             Some(g) => {
-                g.cloth = Box::new(GpuCloth::new(g.gpu, &self.sim)?);
+                *g.cloth = GpuCloth::new(g.gpu, &self.sim)?;
                 g.previous = Vec::with_capacity(previous.len());
                 for v in previous {
                     let up = Arc::new(g.collider(&v)?);

@@ -232,17 +232,16 @@ impl SkinStage {
         self.gpu.is_some()
     }
 
-    /// The rest mesh, the particles (when the method has them) and the last frame's bones.
+    /// The rest mesh, the particles (when the method has them; read back from the GPU when
+    /// they run there) and the last frame's bones.
     fn save(&self) -> Result<Vec<u8>> {
-        let particles = match &self.state {
-            Some(State::Particles(_, Some(_))) => {
-                return Err(Error::Run(format!(
-                    "node '{}': particle skinning on the GPU cannot be checkpointed yet (its \
-                     particles stay on the GPU); run it with backend: Cpu",
-                    self.name
-                )));
+        let particles = match (&self.state, self.gpu) {
+            (Some(State::Particles(sim, Some(g))), Some(ctx)) => {
+                let mut now = (**sim).clone();
+                g.read_into(ctx, &mut now)?;
+                Some(now)
             }
-            Some(State::Particles(sim, None)) => Some(&**sim),
+            (Some(State::Particles(sim, _)), _) => Some((**sim).clone()),
             _ => None,
         };
         save_state(&(&self.rest, particles, &self.last_skin))
@@ -262,8 +261,11 @@ impl SkinStage {
             self.begin(&rest)?;
             self.rest = Some(rest);
         }
-        if let (Some(State::Particles(sim, _)), Some(p)) = (&mut self.state, particles) {
+        if let (Some(State::Particles(sim, gpu)), Some(p)) = (&mut self.state, particles) {
             **sim = p;
+            if let (Some(g), Some(ctx)) = (gpu, self.gpu) {
+                **g = GpuParticleSkin::new(ctx, sim)?;
+            }
         }
         self.last_skin = last_skin;
         Ok(())

@@ -9,7 +9,7 @@
 //! 16 threads. The arrays are flat `Vec4`s and CSR lists, the layout the GPU path will bind.
 
 use super::contact::{self, Collider, Hit};
-use super::metrics::{ClothFrameMetrics, Energy};
+use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::FieldView;
 use super::shape::ClothShape;
@@ -832,26 +832,9 @@ impl ClothSim {
         state: ClothState,
         side: Vec<Vec4>,
         fields_end: &[&DistanceField],
-        gpu: &super::gpu::GpuClothFrameMetrics,
+        gpu: &GpuClothFrameMetrics,
     ) -> Result<ClothFrameMetrics> {
-        let n = self.len();
-        let nf = fields_end.len();
-        if state.pos.len() != n || state.prev.len() != n || side.len() != n * nf.max(1) {
-            return Err(Error::Invalid(format!(
-                "cloth: a GPU state of {} particles and {} side entries for {n} particles and \
-                 {nf} colliders",
-                state.pos.len(),
-                side.len()
-            )));
-        }
-        self.state = state;
-        self.side = side;
-        self.side_fields = nf;
-        self.dt_prev = Some(gpu.dt_substep);
-        // What else the GPU cloth carries into its next frame: the pins start from their
-        // targets, and the energy limit rests on the last substep's kinetic energy.
-        self.pin_from.clone_from(&self.pin_to);
-        self.gpu_kinetic = Some(gpu.kinetic);
+        let stats = self.adopt(state, side, fields_end.len(), gpu)?;
         let colliders: Vec<Collider> = fields_end
             .iter()
             .map(|&f| Collider {
@@ -860,14 +843,6 @@ impl ClothSim {
                 span: (1.0, 1.0),
             })
             .collect();
-        let stats = SubstepStats {
-            contacts: gpu.contacts,
-            inside: gpu.inside,
-            max_depth: gpu.max_depth,
-            max_accel: gpu.max_accel,
-            band_misses: gpu.band_misses,
-            ..SubstepStats::new()
-        };
         Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &[], &stats, &stats))
     }
 
@@ -884,10 +859,27 @@ impl ClothSim {
         &mut self,
         state: ClothState,
         side: Vec<Vec4>,
-        gpu: &super::gpu::GpuClothFrameMetrics,
+        gpu: &GpuClothFrameMetrics,
     ) -> Result<ClothFrameMetrics> {
+        let stats = self.adopt(state, side, gpu.colliders as usize, gpu)?;
+        // No colliders here: the frame pass measures strain and energies (and a ground
+        // residual, which the GPU's replaces).
+        let mut m = self.metrics(gpu.frame, gpu.dt_substep, &[], &[], &stats, &stats);
+        m.close = gpu.close;
+        m.close_max_depth = gpu.close_max_depth;
+        Ok(m)
+    }
+
+    /// Takes the GPU cloth's state after a frame with `nf` colliders (see
+    /// [`ClothSim::adopt_gpu_frame`]); returns the frame's stats as the GPU counted them.
+    fn adopt(
+        &mut self,
+        state: ClothState,
+        side: Vec<Vec4>,
+        nf: usize,
+        gpu: &GpuClothFrameMetrics,
+    ) -> Result<SubstepStats> {
         let n = self.len();
-        let nf = gpu.colliders as usize;
         if state.pos.len() != n || state.prev.len() != n || side.len() != n * nf.max(1) {
             return Err(Error::Invalid(format!(
                 "cloth: a GPU state of {} particles and {} side entries for {n} particles and \
@@ -904,20 +896,14 @@ impl ClothSim {
         // targets, and the energy limit rests on the last substep's kinetic energy.
         self.pin_from.clone_from(&self.pin_to);
         self.gpu_kinetic = Some(gpu.kinetic);
-        let stats = SubstepStats {
+        Ok(SubstepStats {
             contacts: gpu.contacts,
             inside: gpu.inside,
             max_depth: gpu.max_depth,
             max_accel: gpu.max_accel,
             band_misses: gpu.band_misses,
             ..SubstepStats::new()
-        };
-        // No colliders here: the frame pass measures strain and energies (and a ground
-        // residual, which the GPU's replaces).
-        let mut m = self.metrics(gpu.frame, gpu.dt_substep, &[], &[], &stats, &stats);
-        m.close = gpu.close;
-        m.close_max_depth = gpu.close_max_depth;
-        Ok(m)
+        })
     }
 
     /// The cloth as a mesh (the garment's own vertex layout and UVs, or the grid's), with

@@ -62,3 +62,36 @@ pub struct ClothFrameMetrics {
     /// `energy_drift` / |that first total| (0 when it is 0).
     pub energy_drift_rel: f64,
 }
+
+/// What a GPU frame reports: the subset of [`super::ClothFrameMetrics`] that per-particle
+/// flags give without a reduction on the GPU, and the residual contacts, measured on the GPU
+/// after the frame's last substep. [`ClothSim::adopt_gpu_frame_resident`] completes it
+/// (strain, energies) from the state read back once per frame without any field on the CPU;
+/// [`super::ClothSim::adopt_gpu_frame`] does the same but measures the residual contacts again on
+/// the CPU against CPU copies of the end-of-frame fields.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct GpuClothFrameMetrics {
+    pub frame: u32,
+    pub substeps: u32,
+    pub dt_substep: f32,
+    /// Contacts (collider and ground hits) in the last substep, as on the CPU.
+    pub contacts: u32,
+    /// Sum over particles of each one's most hits from inside in one substep: at least the
+    /// CPU's `inside` (the most in one substep), and 0 exactly when it is 0.
+    pub inside: u32,
+    pub max_depth: f32,
+    pub max_accel: f32,
+    pub band_misses: u32,
+    /// Kinetic energy of the last substep (free particles), J.
+    pub kinetic: f64,
+    /// Colliders of the frame (the side memory holds this many entries per particle, at
+    /// least one).
+    pub colliders: u32,
+    /// After the frame, against the end-of-frame colliders (their end fields, as the CPU's
+    /// frame pass takes them) and the ground: free particles closer than ε...
+    pub close: u32,
+    /// ...and how much closer, at most (0 when none is). The CPU's formulas, in the shader's
+    /// f32 arithmetic (which may fuse), so a particle left within rounding of ε may count
+    /// here and not on the CPU, or the other way.
+    pub close_max_depth: f32,
+}

@@ -180,27 +180,6 @@ fn segment_hits(p: DVec3, q: DVec3, t: &[DVec3; 3]) -> bool {
     (0.0..=1.0).contains(&w)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use imprint_core::mesh::primitives;
-
-    #[test]
-    fn cube_volume_and_section_are_exact() {
-        let m = primitives::cuboid(Vec3::new(1.0, 2.0, 3.0), 2);
-        assert!((volume(&m) - 48.0).abs() < 1e-9, "{}", volume(&m));
-        // Across z: a 2 × 4 rectangle; across x off-centre: 4 × 6.
-        let a = cross_section_area(&m, Vec3::new(0.1, 0.2, 0.3), Vec3::Z);
-        assert!((a - 8.0).abs() < 1e-9, "{a}");
-        let a = cross_section_area(&m, Vec3::new(0.7, 0.0, 0.0), -Vec3::X);
-        assert!((a - 24.0).abs() < 1e-9, "{a}");
-        // Through a grid line of vertices (x = 0 is one): still counted once.
-        let a = cross_section_area(&m, Vec3::ZERO, Vec3::X);
-        assert!((a - 24.0).abs() < 1e-9, "{a}");
-        assert!(self_intersecting_pairs(&m).is_empty());
-    }
-}
-
 /// The mesh's volume and its section at each joint of `rig` (bones with a parent, in file
 /// order): the plane through the bone's head halving the angle between it and its parent.
 /// The candy-wrapper collapse of LBS under a twist shows as a section near 0, the loss at a
@@ -221,4 +200,25 @@ pub fn joint_measures(
         })
         .collect();
     (volume(mesh), sections)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imprint_core::mesh::primitives;
+
+    #[test]
+    fn cube_volume_and_section_are_exact() {
+        let m = primitives::cuboid(Vec3::new(1.0, 2.0, 3.0), 2);
+        assert!((volume(&m) - 48.0).abs() < 1e-9, "{}", volume(&m));
+        // Across z: a 2 × 4 rectangle; across x off-centre: 4 × 6.
+        let a = cross_section_area(&m, Vec3::new(0.1, 0.2, 0.3), Vec3::Z);
+        assert!((a - 8.0).abs() < 1e-9, "{a}");
+        let a = cross_section_area(&m, Vec3::new(0.7, 0.0, 0.0), -Vec3::X);
+        assert!((a - 24.0).abs() < 1e-9, "{a}");
+        // Through a grid line of vertices (x = 0 is one): still counted once.
+        let a = cross_section_area(&m, Vec3::ZERO, Vec3::X);
+        assert!((a - 24.0).abs() < 1e-9, "{a}");
+        assert!(self_intersecting_pairs(&m).is_empty());
+    }
 }

@@ -306,12 +306,13 @@ impl FieldStage {
         let sc = self.sched.schedule;
         let builds = ctx.first || (ctx.key && ctx.changed);
         // Last frame's field, if nobody holds it any more, lends its buffers.
-        if builds && sc.split == 1 {
-            if let Some(Value::Field(own)) = ctx.own.take() {
-                match FieldValue::try_take(own) {
-                    Ok(f) => self.sched.builder.recycle(f),
-                    Err(shared) => ctx.own = Some(Value::Field(shared)),
-                }
+        if builds
+            && sc.split == 1
+            && let Some(Value::Field(own)) = ctx.own.take()
+        {
+            match FieldValue::try_take(own) {
+                Ok(f) => self.sched.builder.recycle(f),
+                Err(shared) => ctx.own = Some(Value::Field(shared)),
             }
         }
         let (values, gpu) = (ctx.values, ctx.gpu);

@@ -1,0 +1,27 @@
+//! What every CLI test does: run the built `imprint` in a folder.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Runs the built binary in `cwd` (with a runtime folder, so the graphics stack's probe has
+/// one).
+pub fn imprint(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_imprint"))
+        .args(args)
+        .current_dir(cwd)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("imprint runs")
+}
+
+/// Runs `imprint` and expects success, showing its arguments and stderr otherwise.
+pub fn run_ok(args: &[&str], cwd: &Path) -> Output {
+    let out = imprint(args, cwd);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
