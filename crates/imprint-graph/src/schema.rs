@@ -31,10 +31,29 @@ fn default_fps() -> f32 {
     30.0
 }
 
-/// A node of the file. Adding a kind: a module in `nodes/`, a variant here, an arm in
-/// [`NodeSpec::node`].
-#[derive(Clone, Debug, Deserialize, Serialize)]
-pub enum NodeSpec {
+/// Declares [`NodeSpec`], one variant per node kind with the type of its fields, and its one
+/// dispatch to the kind's module ([`NodeSpec::node`]).
+macro_rules! node_kinds {
+    ($($(#[$doc:meta])* $kind:ident($spec:ty),)*) => {
+        /// A node of the file: its kind and fields.
+        #[derive(Clone, Debug, Deserialize, Serialize)]
+        pub enum NodeSpec {
+            $($(#[$doc])* $kind($spec),)*
+        }
+
+        impl NodeSpec {
+            /// The node's module: the one dispatch on the kind.
+            pub fn node(&self) -> &dyn Node {
+                match self {
+                    $(NodeSpec::$kind(n) => n,)*
+                }
+            }
+        }
+    };
+}
+
+// Adding a node kind: its module in `nodes/` (registered there with `pub mod`) and a line here.
+node_kinds! {
     /// A mesh from an OBJ file or a primitive, fitted and moved (output: Mesh).
     Mesh(MeshParams),
     /// Surface voxelisation into a discrete boundary (input: Mesh; output: Boundary).
@@ -76,25 +95,6 @@ pub enum NodeSpec {
 }
 
 impl NodeSpec {
-    /// The node's module: the one dispatch on the kind.
-    pub fn node(&self) -> &dyn Node {
-        match self {
-            NodeSpec::Mesh(n) => n,
-            NodeSpec::Voxelize(n) => n,
-            NodeSpec::DistanceField(n) => n,
-            NodeSpec::WriteField(n) => n,
-            NodeSpec::WriteMesh(n) => n,
-            NodeSpec::Cloth(n) => n,
-            NodeSpec::Heightmap(n) => n,
-            NodeSpec::WriteHeightmap(n) => n,
-            NodeSpec::Render(n) => n,
-            NodeSpec::Ground(n) => n,
-            NodeSpec::Snow(n) => n,
-            NodeSpec::Drape(n) => n,
-            NodeSpec::Skin(n) => n,
-        }
-    }
-
     pub fn kind(&self) -> &'static str {
         self.node().kind()
     }
