@@ -22,6 +22,11 @@ fn root() -> PathBuf {
 /// ball presses (taking the snow in), particle skinning; writers of every kind, with a
 /// contact sheet and a GIF, some on every other frame.
 fn stateful_scene(frames: u32) -> String {
+    stateful_scene_on(frames, "Cpu")
+}
+
+/// [`stateful_scene`] with the file's backend `backend`.
+fn stateful_scene_on(frames: u32, backend: &str) -> String {
     let root = root();
     let bunny = root.join("assets/meshes/stanford-bunny.obj");
     let rig = root.join("assets/rigs/limb.ron");
@@ -30,7 +35,7 @@ fn stateful_scene(frames: u32) -> String {
         r#"Pipeline(
     frames: {frames},
     fps: 24,
-    backend: Cpu,
+    backend: {backend},
     nodes: {{
         "bunny": Mesh(path: "{bunny}", fit: (size: 0.6, center: (0, 0.3, 0)),
                       motion: [Breathe(amplitude: 0.05, period: 1.0), Twist(axis: Y, degrees: 20, period: 1.0)]),
@@ -61,6 +66,9 @@ fn stateful_scene(frames: u32) -> String {
         "ground": Ground(objects: ["ball"], accumulate: "snow",
                          params: (size: (1.0, 1.0), resolution: (40, 40), initial: Flat(0.05),
                                   material: Preset(Sand))),
+        "prints": Ground(objects: ["ball"],
+                         params: (size: (1.0, 1.0), resolution: (40, 40), initial: Flat(0.05),
+                                  material: Preset(Snow))),
         "limb": Mesh(primitive: Cylinder(radius: 0.1, length: 1.0, segments: 12, rings: 10)),
         "skin": Skin(mesh: "limb", rig: "{rig}", method: Particles(), offset: (0.8, 0, 0)),
         "render": Render(
@@ -75,6 +83,7 @@ fn stateful_scene(frames: u32) -> String {
         "draped_obj": WriteMesh(mesh: "draped", format: Ply, every: 2),
         "skin_obj": WriteMesh(mesh: "skin", every: 3),
         "heights": WriteHeightmap(heights: "ground", formats: [Npy, Png16]),
+        "prints_h": WriteHeightmap(heights: "prints", formats: [Npy], every: 2),
         "fields": WriteField(field: "field", every: 2, slices: [(axis: X)]),
     }},
 )
@@ -169,6 +178,50 @@ fn a_run_cut_in_three_with_resume_equals_the_whole_run() {
         .filter(|p| p.to_string_lossy().contains(".tmp"))
         .collect();
     assert!(tmp.is_empty(), "{tmp:?}");
+}
+
+/// The same on the GPU (the software adapter in CI): GPU cloths, field builds, ground
+/// passes, snow maps and particle skinning are checkpointed through their CPU mirrors and
+/// rebuilt on the GPU, and the cut run equals the whole one byte for byte.
+#[test]
+fn a_gpu_run_cut_in_three_equals_the_whole_gpu_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("scene.ron");
+    std::fs::write(&file, stateful_scene_on(6, "Gpu")).unwrap();
+    let f = file.to_str().unwrap();
+    let whole = imprint(&["run", f, "--out", "whole"], dir.path());
+    let err = String::from_utf8_lossy(&whole.stderr);
+    if whole.status.code() == Some(1) && err.contains("no GPU adapter") {
+        assert!(
+            std::env::var("IMPRINT_REQUIRE_GPU").as_deref() != Ok("1"),
+            "IMPRINT_REQUIRE_GPU=1 but: {err}"
+        );
+        eprintln!("skipped: no GPU adapter (set IMPRINT_REQUIRE_GPU=1 to fail instead)");
+        return;
+    }
+    assert_eq!(whole.status.code(), Some(0), "{err}");
+    let report = report(&dir.path().join("whole"));
+    for node in ["cloth", "field", "prints", "snow", "skin"] {
+        assert_eq!(report["nodes"][node]["backend"], "gpu", "{node}");
+    }
+    let cut = ["run", f, "--out", "cut"];
+    run_ok(
+        &[&cut[..], &["--frames", "0..2", "--checkpoint-every", "2"]].concat(),
+        dir.path(),
+    );
+    run_ok(
+        &[
+            &cut[..],
+            &["--frames", "0..4", "--resume", "--checkpoint-every", "1"],
+        ]
+        .concat(),
+        dir.path(),
+    );
+    run_ok(
+        &[&cut[..], &["--frames", "0..6", "--resume"]].concat(),
+        dir.path(),
+    );
+    assert_same_outputs(&dir.path().join("whole"), &dir.path().join("cut"));
 }
 
 /// Ctrl-C stops a run between frames with exit code 130, leaving report.json with the frames
