@@ -22,6 +22,40 @@ pub enum Value {
     Heights(Arc<HeightField>),
 }
 
+impl Value {
+    /// Where the value is not finite, if anywhere (a value on the GPU is not looked at).
+    pub fn first_non_finite(&self) -> Option<String> {
+        let bad = |v: &[f32]| v.iter().position(|x| !x.is_finite());
+        match self {
+            Value::Mesh(m) => {
+                let i = m.positions.iter().position(|p| !p.is_finite())?;
+                Some(format!("vertex {i} is at {}", m.positions[i]))
+            }
+            Value::Heights(h) => {
+                let i = bad(&h.heights)?;
+                let (x, z) = (i as u32 % h.dims.x, i as u32 / h.dims.x);
+                Some(format!("the height of cell ({x}, {z}) is {}", h.heights[i]))
+            }
+            Value::Field(f) => match &f.data {
+                FieldData::Cpu(f) => {
+                    let i = bad(&f.dist)?;
+                    Some(format!("the distance in cell {i} is {}", f.dist[i]))
+                }
+                FieldData::Blend { a, b, .. } => {
+                    let (f, i) = [a, b].into_iter().find_map(|f| Some((f, bad(&f.dist)?)))?;
+                    Some(format!("the distance in cell {i} is {}", f.dist[i]))
+                }
+                FieldData::Gpu(_) => None,
+            },
+            Value::Boundary(BoundaryValue::Cpu(b)) => {
+                let i = b.points.iter().position(|p| !p.is_finite())?;
+                Some(format!("boundary point {i} is at {}", b.points[i]))
+            }
+            Value::Boundary(BoundaryValue::Gpu(_)) => None,
+        }
+    }
+}
+
 #[derive(Clone)]
 pub enum BoundaryValue {
     Cpu(Arc<Boundary>),
@@ -334,5 +368,27 @@ impl FieldSnapshot {
                 weight,
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{UVec2, Vec2, Vec3};
+
+    #[test]
+    fn non_finite_values_are_found_and_named() {
+        let mut mesh = Mesh::default();
+        mesh.positions = vec![Vec3::ZERO, Vec3::new(1.0, f32::NAN, 0.0)];
+        let v = Value::Mesh(Arc::new(mesh.clone()));
+        assert!(v.first_non_finite().unwrap().starts_with("vertex 1 is at"));
+        mesh.positions[1].y = 2.0;
+        assert_eq!(Value::Mesh(Arc::new(mesh)).first_non_finite(), None);
+        let h = HeightField::new(Vec2::ZERO, 0.1, UVec2::new(2, 2), vec![0.0; 4]).unwrap();
+        let mut bad = h.clone();
+        bad.heights[3] = f32::INFINITY;
+        assert_eq!(Value::Heights(Arc::new(h)).first_non_finite(), None);
+        let said = Value::Heights(Arc::new(bad)).first_non_finite().unwrap();
+        assert_eq!(said, "the height of cell (1, 1) is inf");
     }
 }

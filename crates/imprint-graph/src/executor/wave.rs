@@ -82,7 +82,7 @@ impl Executor {
     fn apply(&mut self, mut job: Job, frame: u32) -> crate::Result<()> {
         let (result, ms, moved) = job.outcome.take().expect("every job ran");
         let slot = &mut self.slots[job.slot];
-        let step = match result {
+        let step = match result.and_then(|step| finite(step, &slot.name, frame)) {
             Ok(step) => step,
             Err(e) => {
                 // The last good value stays, for a viewer that goes on after the error.
@@ -116,6 +116,21 @@ impl Executor {
             });
         }
         Ok(())
+    }
+}
+
+/// Never silent: a published value that is not finite stops the run, named.
+fn finite(step: Step, node: &str, frame: u32) -> imprint_core::Result<Step> {
+    match step.published.as_ref().and_then(Value::first_non_finite) {
+        None => Ok(step),
+        Some(what) => Err(imprint_core::Error::Numerical {
+            node: node.to_string(),
+            frame,
+            message: format!("its output is not finite: {what}"),
+            hint: "lower the time step (more substeps) or the stiffness, or check the inputs \
+                   for huge coordinates"
+                .into(),
+        }),
     }
 }
 
