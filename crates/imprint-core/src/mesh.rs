@@ -38,12 +38,43 @@ impl Mesh {
         if !path.exists() {
             return Err(Error::mesh(path, "file not found"));
         }
+        let file = std::fs::File::open(path).map_err(|e| {
+            Error::mesh(
+                path,
+                format!(
+                    "not a readable OBJ file ({}: {e})",
+                    tobj::LoadError::OpenFileFailed
+                ),
+            )
+        })?;
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Self::read_obj(&mut std::io::BufReader::new(file), path, |mtl| {
+            tobj::load_mtl(dir.join(mtl))
+        })
+    }
+
+    /// Reads OBJ text held in memory, as [`Mesh::load_obj`] reads a file (`name` stands for
+    /// the path in errors; `mtllib` lines are ignored: no file is opened). Any bytes give a
+    /// mesh or an error, never a panic.
+    pub fn from_obj_bytes(bytes: &[u8], name: &str) -> Result<Self> {
+        Self::read_obj(&mut &bytes[..], Path::new(name), |_| {
+            Ok((Vec::new(), Default::default()))
+        })
+    }
+
+    /// The OBJ reader behind [`Mesh::load_obj`] and [`Mesh::from_obj_bytes`]; `materials`
+    /// loads an `mtllib` (materials split objects into models, nothing more is used).
+    fn read_obj(
+        reader: &mut impl std::io::BufRead,
+        path: &Path,
+        materials: impl Fn(&Path) -> tobj::MTLLoadResult,
+    ) -> Result<Self> {
         let opts = tobj::LoadOptions {
             triangulate: true,
             single_index: true,
             ..Default::default()
         };
-        let (models, _materials) = tobj::load_obj(path, &opts)
+        let (models, _materials) = tobj::load_obj_buf(reader, &opts, materials)
             .map_err(|e| Error::mesh(path, format!("not a readable OBJ file ({e})")))?;
         let mut positions = Vec::new();
         let mut triangles = Vec::new();

@@ -124,10 +124,14 @@ pub fn ron_error(src: &Source, e: &ron::error::SpannedError) -> PipelineError {
     let start = src.offset(e.span.start.line, e.span.start.col);
     let mut end = src.offset(e.span.end.line, e.span.end.col);
     if end <= start {
-        // Point at the token that starts here.
-        end = src.text[start..]
+        // Point at the token that starts here (at least its first character, whole: the
+        // span must not split a character such as U+2000 or U+00A0).
+        let rest = &src.text[start..];
+        end = rest
             .find(|c: char| c.is_whitespace() || ",:()[]{}".contains(c))
-            .map_or(src.text.len(), |n| start + n.max(1));
+            .map_or(src.text.len(), |n| {
+                start + n.max(rest.chars().next().map_or(0, char::len_utf8))
+            });
     }
     let message = e.code.to_string();
     let help = if message.contains("unknown variant") || message.contains("Unexpected variant") {

@@ -149,9 +149,13 @@ fn find_field(text: &str, body: (usize, usize), field: &str) -> Option<(usize, u
     });
     for colon in at_depth0_starts {
         let before = text[body.0..colon].trim_end();
+        // The identifier starts after the last character that cannot be in one (which may
+        // be wider than a byte: `°band:` is the field `band`).
         let ident_start = before
-            .rfind(|c: char| !(c.is_alphanumeric() || c == '_'))
-            .map_or(0, |p| p + 1);
+            .char_indices()
+            .rev()
+            .find(|&(_, c)| !(c.is_alphanumeric() || c == '_'))
+            .map_or(0, |(p, c)| p + c.len_utf8());
         if &before[ident_start..] == field {
             key_end = Some(colon + 1);
             break;
