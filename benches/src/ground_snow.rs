@@ -17,6 +17,30 @@ use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
 
+/// A box a quarter of the field wide and 0.3 m tall, pressed 0.1 m into `p` (flat at 0.1 m)
+/// and dragged half the field along x in 24 frames: mean and max ms per contact frame.
+fn time_dragged_box(p: &GroundParams) -> (f64, f64) {
+    let mut g = imprint_stages::ground::GroundSim::new(p, Path::new(".")).expect("ground");
+    let side = p.size[0] / 4.0;
+    let half = Vec3::new(side / 2.0, 0.15, side / 2.0);
+    let base = imprint_core::mesh::primitives::cuboid(half, 1);
+    let (mut total, mut max, mut frames) = (0.0, 0.0f64, 0);
+    for f in 0..24 {
+        let x = -0.25 * p.size[0] + 0.5 * p.size[0] * f as f32 / 23.0;
+        let mut m = base.clone();
+        m.transform(Mat4::from_translation(Vec3::new(x, 0.1 + 0.15 - 0.1, 0.0)));
+        let t = Instant::now();
+        let metrics = g.step(&[&m]).expect("ground step");
+        let dt = t.elapsed().as_secs_f64() * 1e3;
+        if metrics.contact_cells > 0 {
+            total += dt;
+            max = max.max(dt);
+            frames += 1;
+        }
+    }
+    (total / frames.max(1) as f64, max)
+}
+
 pub fn section(_root: &Path, repeat: usize) -> String {
     let mut s = String::from("## 8. Ground and snow (CPU)\n\n");
     let runs = repeat.clamp(1, 5);
@@ -60,6 +84,33 @@ pub fn section(_root: &Path, repeat: usize) -> String {
             eprintln!("ground: {n}², {label}: {ms:.2} ms");
             let _ = writeln!(s, "| {n}² | {label} | {ms:.2} |");
         }
+    }
+    let _ = writeln!(
+        s,
+        "\n**Ground settle.** 256² cells of 1 cm, Sand, flat at 0.1 m: the rolling sphere above, \
+         and a box a quarter of the field wide (0.64 m square, 0.3 m tall) pressed a third of its \
+         height and dragged 1.28 m in 24 frames; ms per contact frame (mean; max in brackets), \
+         median of {runs} runs. Goal (issue): sphere ≤ 1 ms, box ≤ 3 ms, with the default.\n"
+    );
+    let _ = writeln!(s, "| scene | relaxation | ms per contact frame (max) |");
+    let _ = writeln!(s, "|---|---|---:|");
+    for (label, relaxation) in [
+        ("Settle (default)", Relaxation::Settle),
+        ("Labelled (O, En 5)", Relaxation::Labelled),
+    ] {
+        let mut p = GroundParams::new([2.56, 2.56], [256, 256], Material::Preset(Preset::Sand));
+        p.relaxation = relaxation;
+        let ms = median(
+            (0..runs)
+                .map(|_| imprint_tests::ground::time_rolling_sphere(&p, 48))
+                .collect(),
+        );
+        eprintln!("ground settle: sphere, {label}: {ms:.3} ms");
+        let _ = writeln!(s, "| rolling sphere | {label} | {ms:.3} |");
+        let (mean, max): (Vec<f64>, Vec<f64>) = (0..runs).map(|_| time_dragged_box(&p)).unzip();
+        let (mean, max) = (median(mean), median(max));
+        eprintln!("ground settle: box, {label}: {mean:.3} ms (max {max:.3})");
+        let _ = writeln!(s, "| dragged box | {label} | {mean:.3} ({max:.3}) |");
     }
     let mut ball = uv_sphere(0.5, 160, 125);
     ball.transform(Mat4::from_translation(Vec3::new(0.0, 0.6, 0.0)));

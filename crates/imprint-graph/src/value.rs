@@ -378,8 +378,10 @@ mod tests {
 
     #[test]
     fn non_finite_values_are_found_and_named() {
-        let mut mesh = Mesh::default();
-        mesh.positions = vec![Vec3::ZERO, Vec3::new(1.0, f32::NAN, 0.0)];
+        let mut mesh = Mesh {
+            positions: vec![Vec3::ZERO, Vec3::new(1.0, f32::NAN, 0.0)],
+            ..Default::default()
+        };
         let v = Value::Mesh(Arc::new(mesh.clone()));
         assert!(v.first_non_finite().unwrap().starts_with("vertex 1 is at"));
         mesh.positions[1].y = 2.0;

@@ -90,10 +90,9 @@ impl Node for GroundNode {
         let sim = GroundSim::new(&self.params, ctx.check.base_dir)
             .map_err(|e| Error::Invalid(format!("node '{}': {e}", ctx.name())))?;
         let gpu = ctx.choose_gpu()?;
-        // The passes go to the GPU too, except what has no port yet: full relaxation, and
-        // taking a layer in (`accumulate`), which run on the CPU.
-        let passes_on_gpu =
-            self.accumulate.is_none() && self.params.relaxation == Relaxation::Labelled;
+        // The passes go to the GPU too (settling reads back and settles on the CPU), except
+        // what has no port yet: full relaxation, and taking a layer in (`accumulate`).
+        let passes_on_gpu = self.accumulate.is_none() && self.params.relaxation != Relaxation::Full;
         let path = match gpu {
             Some(g) if passes_on_gpu => Path::Gpu(
                 g,

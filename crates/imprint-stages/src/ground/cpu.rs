@@ -36,8 +36,13 @@ pub struct GroundSim {
     frame: u32,
     /// The last frame's contour maps, when it had contact.
     maps: Option<ContourMaps>,
-    /// `Full` mode: cells under an object this frame, which the relaxation leaves alone.
+    /// `Full` and `Settle`: cells under an object this frame, which the relaxation leaves
+    /// alone.
     held: Vec<bool>,
+    /// `Settle`: cells to start the next frame's work list from (the last frame's contact
+    /// cells, which it released, and the cells `add_heights` changed), ascending.
+    #[serde(default)]
+    pending: Vec<u32>,
     /// [`GroundSim::add_heights`]: the fraction of a unit each cell is owed (allocated on
     /// first use).
     residual: Vec<f64>,
@@ -107,7 +112,7 @@ impl GroundSim {
             t.floor().min(NO_SLUMP as f64) as i64
         };
         let held = match params.relaxation {
-            Relaxation::Full => vec![false; grid.len()],
+            Relaxation::Full | Relaxation::Settle => vec![false; grid.len()],
             Relaxation::Labelled => Vec::new(),
         };
         Ok(GroundSim {
@@ -121,13 +126,14 @@ impl GroundSim {
             frame: 0,
             maps: None,
             held,
+            pending: Vec::new(),
             residual: Vec::new(),
         })
     }
 
     /// One frame: contact with `objects`, compression and displacement, then the slump.
-    /// On an error (`Full` relaxation not at rest within `max_relax_iterations`) the ground
-    /// is left as it was at the frame's start.
+    /// On an error (`Full` or `Settle` relaxation not at rest within `max_relax_iterations`)
+    /// the ground is left as it was at the frame's start.
     pub fn step(&mut self, objects: &[&Mesh]) -> Result<GroundFrameMetrics> {
         self.step_with(objects, imprint_core::raster::rasterize_depth_with)
     }
@@ -150,18 +156,24 @@ impl GroundSim {
             ..Default::default()
         };
         self.maps = None;
-        let start = (self.relaxation == Relaxation::Full).then(|| self.heights.clone());
+        let start = (self.relaxation != Relaxation::Labelled).then(|| self.heights.clone());
         if let Some(b) =
             contact::object_bottoms_with(objects, &self.grid, &self.heights, rasterize)?
         {
             self.press(&b, &mut m);
         }
-        if self.relaxation == Relaxation::Full
-            && let Err(e) = self.relax_full(&mut m)
-        {
-            self.heights = start.expect("kept in Full mode");
+        let relaxed = match self.relaxation {
+            Relaxation::Full => self.relax_full(&mut m),
+            Relaxation::Settle => self.settle(&mut m),
+            Relaxation::Labelled => Ok(()),
+        };
+        if let Err(e) = relaxed {
+            self.heights = start.expect("kept but in Labelled mode");
             self.hold_contact(false);
             return Err(e);
+        }
+        if self.relaxation == Relaxation::Settle {
+            self.pending = self.contact_cells();
         }
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
@@ -197,6 +209,7 @@ impl GroundSim {
         }
         let unit = self.grid.unit;
         let top = i32::MAX as i64;
+        let before = (self.relaxation == Relaxation::Settle).then(|| self.heights.clone());
         (&mut self.heights, &mut self.residual, rise)
             .into_par_iter()
             .for_each(|(h, res, &r)| {
@@ -205,6 +218,15 @@ impl GroundSim {
                 *res = want - add;
                 *h = (*h as i64 + add as i64).clamp(0, top) as i32;
             });
+        if let Some(before) = before {
+            // The next frame's settle starts from what changed here too.
+            let changed = (before.iter().zip(&self.heights).enumerate())
+                .filter(|(_, (b, h))| b != h)
+                .map(|(j, _)| j as u32);
+            self.pending.extend(changed);
+            self.pending.sort_unstable();
+            self.pending.dedup();
+        }
         Ok(())
     }
 
@@ -236,6 +258,16 @@ impl GroundSim {
     /// The slump's mode (for the GPU path).
     pub(crate) fn relaxation(&self) -> Relaxation {
         self.relaxation
+    }
+
+    /// `max_relax_iterations` (for the GPU path).
+    pub(crate) fn max_relax_iterations(&self) -> u32 {
+        self.max_relax_iterations
+    }
+
+    /// `Settle`: the cells the next frame's work list starts from (for the GPU path).
+    pub(crate) fn pending(&self) -> &[u32] {
+        &self.pending
     }
 
     /// The outer contour map's width in rings (for the GPU path).
@@ -455,6 +487,39 @@ impl GroundSim {
         }
     }
 
+    /// `Settle`: the work list from the cells the last frame released and this frame's work
+    /// window, to rest (see [`super::settle`]).
+    fn settle(&mut self, m: &mut GroundFrameMetrics) -> Result<()> {
+        if self.threshold >= NO_SLUMP {
+            return Ok(());
+        }
+        let window = self.maps.as_ref().map(|maps| maps.window);
+        super::settle::settle_frame(
+            &mut self.heights,
+            &self.held,
+            self.grid.dims,
+            self.threshold,
+            &self.pending,
+            window,
+            self.max_relax_iterations,
+            self.frame,
+            m,
+        )
+    }
+
+    /// This frame's contact cells, ascending.
+    fn contact_cells(&self) -> Vec<u32> {
+        let Some(maps) = &self.maps else {
+            return Vec::new();
+        };
+        let (win, w) = (maps.window, maps.window.w as usize);
+        let nx = self.grid.dims.x;
+        (maps.contact.iter().enumerate())
+            .filter(|c| *c.1)
+            .map(|(j, _)| win.global((j % w) as u32, (j / w) as u32, nx) as u32)
+            .collect()
+    }
+
     /// `Full`: the slope rule over the whole field, in every direction, until nothing moves.
     ///
     /// One iteration is four passes, each over a perfect matching of neighbour pairs (x
@@ -527,28 +592,8 @@ impl GroundSim {
         let h = &self.heights;
         let diff = |a: usize, b: usize| (h[a] as i64 - h[b] as i64).unsigned_abs();
         let max = match self.relaxation {
-            Relaxation::Full => {
-                let free = |j: usize| !self.held[j];
-                (0..self.grid.dims.y as usize)
-                    .into_par_iter()
-                    .map(|k| {
-                        let mut d = 0;
-                        for i in 0..nx {
-                            let j = k * nx + i;
-                            if !free(j) {
-                                continue;
-                            }
-                            if i + 1 < nx && free(j + 1) {
-                                d = d.max(diff(j, j + 1));
-                            }
-                            if j + nx < h.len() && free(j + nx) {
-                                d = d.max(diff(j, j + nx));
-                            }
-                        }
-                        d
-                    })
-                    .max()
-                    .unwrap_or(0)
+            Relaxation::Full | Relaxation::Settle => {
+                super::settle::max_free_difference(h, &self.held, self.grid.dims)
             }
             Relaxation::Labelled => {
                 let Some(maps) = &self.maps else {

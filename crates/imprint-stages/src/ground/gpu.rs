@@ -33,6 +33,12 @@
 //! contact's box (32 bytes, read back to size the work window) and the carries; no depth map
 //! is read back and no bottom or carry uploaded, and the heights and metrics are the same.
 //!
+//! `Relaxation::Settle` (the default) runs steps 1-4 here, skips step 5, and settles on the
+//! CPU: the heights are read back anyway (step 6), the frame's contact cells come back with
+//! them (one `u32` per window cell), `ground::settle::settle_frame` runs on them exactly as
+//! in [`GroundSim`], and the heights are uploaded again when it moved anything; `max_slope`
+//! is then taken on the CPU as [`GroundSim`] takes it. Same integers and metrics as the CPU.
+//!
 //! Not ported: `Relaxation::Full` ([`GpuGround::new`] refuses it; use [`GroundSim`]), and
 //! [`GroundSim::add_heights`] (move the ground to the CPU and back with
 //! [`GpuGround::to_sim`] / [`GpuGround::from_sim`]).
@@ -98,6 +104,11 @@ pub struct GpuGround {
     band: u32,
     /// T in units, or `None` (θ = 90°): no slump.
     threshold: Option<i64>,
+    /// `Relaxation::Settle`: settle on the CPU after the GPU's press (else O's slump here).
+    settle: bool,
+    max_relax_iterations: u32,
+    /// `Settle`: the cells the next frame's work list starts from (as in [`GroundSim`]).
+    pending: Vec<u32>,
     frame: u32,
     heights: wgpu::Buffer,
     /// The heights as of the last frame's end, for the next frame's contact.
@@ -142,6 +153,9 @@ impl GpuGround {
             material: sim.material(),
             band: sim.band(),
             threshold: sim.threshold_units(),
+            settle: sim.relaxation() == Relaxation::Settle,
+            max_relax_iterations: sim.max_relax_iterations(),
+            pending: sim.pending().to_vec(),
             frame: sim.frame(),
             heights: ctx.storage_buffer("ground heights", sim.heights_units())?,
             mirror: sim.heights_units().to_vec(),
@@ -212,10 +226,12 @@ impl GpuGround {
             frame: self.frame,
             ..Default::default()
         };
+        let mut pressed = None;
         if let Some(b) = contact::object_bottoms_with(objects, &self.grid, &self.mirror, rasterize)?
         {
-            self.press(ctx, &b, &mut m)?;
+            pressed = self.press(ctx, &b, &mut m)?;
         }
+        self.settle_after(ctx, pressed, &mut m)?;
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
         self.frame += 1;
@@ -241,7 +257,8 @@ impl GpuGround {
             frame: self.frame,
             ..Default::default()
         };
-        self.contact_resident(ctx, raster, objects, &mut m)?;
+        let pressed = self.contact_resident(ctx, raster, objects, &mut m)?;
+        self.settle_after(ctx, pressed, &mut m)?;
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
         self.frame += 1;
@@ -255,7 +272,7 @@ impl GpuGround {
         raster: &mut GpuRasterizer,
         objects: &[&Mesh],
         m: &mut GroundFrameMetrics,
-    ) -> Result<()> {
+    ) -> Result<Option<Pressed>> {
         let grid = self.grid;
         let nx = grid.dims.x;
         // The objects to rasterise and where, as contact::object_bottoms_with chooses them.
@@ -282,7 +299,7 @@ impl GpuGround {
             parts.push((mesh, w, cam));
         }
         let Some(bw) = parts.iter().map(|p| p.1).reduce(|a, b| a.union(&b)) else {
-            return Ok(());
+            return Ok(None);
         };
         let (unit_lo, unit_hi, unit_exp) = unit_parts(grid.unit)?;
         let base = ContactParams {
@@ -363,7 +380,7 @@ impl GpuGround {
             ));
         }
         if bx[4] == 0 {
-            return Ok(());
+            return Ok(None);
         }
         m.contact_cells = bx[4];
         m.removed_units = (bx[5] as u64 | (bx[6] as u64) << 32) as i64;
@@ -415,10 +432,10 @@ impl GpuGround {
         ctx: &GpuContext,
         b: &contact::Bottoms,
         m: &mut GroundFrameMetrics,
-    ) -> Result<()> {
+    ) -> Result<Option<Pressed>> {
         let nx = self.grid.dims.x;
         let Some((win, bottom)) = work_window(b, &self.mirror, self.grid.dims, self.band) else {
-            return Ok(());
+            return Ok(None);
         };
         let (w, n) = (win.w as usize, win.len());
         let alpha = self.material.displace_ratio as f64;
@@ -447,12 +464,12 @@ impl GpuGround {
         bottom: wgpu::Buffer,
         carry: wgpu::Buffer,
         m: &mut GroundFrameMetrics,
-    ) -> Result<()> {
+    ) -> Result<Option<Pressed>> {
         let nx = self.grid.dims.x;
         let n = win.len();
         let passes = match self.threshold {
-            Some(_) => self.material.slump_iterations,
-            None => 0,
+            Some(_) if !self.settle => self.material.slump_iterations,
+            _ => 0,
         };
         let f = Frame {
             bottom,
@@ -640,8 +657,73 @@ impl GpuGround {
             }
         }
         m.max_slope = stats[STAT_MAX_DIFF] as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
+        let contact = if self.settle {
+            let c: Vec<u32> = ctx.read_buffer(&f.contact)?;
+            let w = win.w as usize;
+            (c.iter().take(n).enumerate())
+                .filter(|c| *c.1 != 0)
+                .map(|(j, _)| win.global((j % w) as u32, (j / w) as u32, nx) as u32)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Ok(Some(Pressed {
+            window: win,
+            contact,
+        }))
+    }
+
+    /// `Settle`: the CPU's settle on the heights read back (see the module doc), then the
+    /// heights uploaded again when it moved anything. On an error the ground keeps the
+    /// frame's press, unsettled (the CPU ground goes back to the frame's start).
+    fn settle_after(
+        &mut self,
+        ctx: &GpuContext,
+        pressed: Option<Pressed>,
+        m: &mut GroundFrameMetrics,
+    ) -> Result<()> {
+        if !self.settle {
+            return Ok(());
+        }
+        let (window, contact) = match pressed {
+            Some(p) => (Some(p.window), p.contact),
+            None => (None, Vec::new()),
+        };
+        let mut held = vec![false; self.grid.len()];
+        for &j in &contact {
+            held[j as usize] = true;
+        }
+        if let Some(t) = self.threshold {
+            let mut heights = self.mirror.clone();
+            super::settle::settle_frame(
+                &mut heights,
+                &held,
+                self.grid.dims,
+                t,
+                &self.pending,
+                window,
+                self.max_relax_iterations,
+                self.frame,
+                m,
+            )?;
+            if m.slumped_units > 0 {
+                ctx.queue
+                    .write_buffer(&self.heights, 0, bytemuck::cast_slice(&heights));
+                self.mirror = heights;
+            }
+        }
+        let d = super::settle::max_free_difference(&self.mirror, &held, self.grid.dims);
+        m.max_slope = d as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
+        self.pending = contact;
         Ok(())
     }
+}
+
+/// What a frame's press on the GPU leaves for `Settle`: its work window and contact cells
+/// (ascending; empty unless settling).
+struct Pressed {
+    window: Window,
+    contact: Vec<u32>,
 }
 
 /// The shader's `ContactParams` (`shaders/ground/contact.wgsl`).

@@ -64,6 +64,7 @@ pub mod cpu;
 pub mod gpu;
 pub mod metrics;
 pub mod params;
+pub(crate) mod settle;
 
 pub use contact::{Bottoms, GroundGrid, NO_OBJECT, Window};
 pub use contour::{ContourMaps, UNLABELLED};

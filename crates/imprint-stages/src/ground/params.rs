@@ -32,12 +32,15 @@ pub struct GroundParams {
     /// How the ground gives way: a preset of O §3 or custom values.
     #[serde(default)]
     pub material: Material,
-    /// Where the slump runs; see [`Relaxation`].
+    /// How the ground slumps after the press: [`Relaxation::Settle`] (the default: to rest
+    /// wherever the ground changed), [`Relaxation::Labelled`] (O's En passes over this
+    /// frame's labelled cells) or [`Relaxation::Full`] (the whole field, by sweeps).
     #[serde(default)]
     pub relaxation: Relaxation,
     /// Rings of cells around the contact that the outer contour map labels (O §2.4), the rim
     /// included: the slump of [`Relaxation::Labelled`] moves material no farther out than
-    /// this. O gives no number; 16 holds the rim of a sand print several cells high.
+    /// this. O gives no number; 16 holds the rim of a sand print several cells high. The
+    /// other relaxations are not bounded by it.
     #[serde(default = "default_slump_band")]
     pub slump_band: u32,
     /// The fixed-point unit of heights, m: heights are whole multiples of it (`i32`), so
@@ -45,8 +48,9 @@ pub struct GroundParams {
     /// exactly. 1e-5 m (10 µm) holds heights up to about 21 km.
     #[serde(default = "default_height_unit")]
     pub height_unit: f64,
-    /// [`Relaxation::Full`] stops with an error when the field has not come to rest after
-    /// this many iterations in one frame.
+    /// The bound on one frame's relaxation, past which it stops with an error (the ground
+    /// left as it was at the frame's start): [`Relaxation::Full`], sweeps of its region;
+    /// [`Relaxation::Settle`], work-list visits per cell of the field.
     #[serde(default = "default_max_relax_iterations")]
     pub max_relax_iterations: u32,
 }
@@ -87,7 +91,8 @@ pub enum Material {
         /// θ: the steepest slope the slump leaves between neighbouring cells, degrees in
         /// (0, 90]; 90 = no slump (walls stand).
         repose_degrees: f32,
-        /// En: slump passes per frame.
+        /// En: slump passes per frame of [`Relaxation::Labelled`] (the other relaxations run
+        /// to rest and do not read it).
         slump_iterations: u32,
         /// α in [0, 1]: the fraction of the pressed-out ground pushed to the rim; the rest is
         /// compressed away. 1 conserves mass exactly.
@@ -144,12 +149,25 @@ impl Material {
     }
 }
 
-/// Where the slump runs.
+/// How and where the ground slumps after the press. One field chooses it; the material's θ
+/// sets the slope for all three, and En (`slump_iterations`) counts only for `Labelled`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Relaxation {
-    /// O §2.5: `slump_iterations` passes over the labelled cells around the contact only,
-    /// ring by ring from the rim outward. The fast path.
+    /// The default: after every frame, no two 4-neighbouring cells that no object holds
+    /// (neither in contact this frame) differ by more than tan θ · cell plus one height unit,
+    /// wherever the ground changed (this frame's window around the contact, the cells the
+    /// last frame's contact released, what `add_heights` changed), not only this frame's
+    /// labelled cells. A FIFO work list from those cells moves whole units from a cell to its
+    /// steepest lower neighbour until nothing is too steep (`ground::settle`); its cost grows
+    /// with the cells that move, and `max_relax_iterations` bounds it. Ground that never
+    /// changed (e.g. a steep initial heightmap) is not touched.
     #[default]
+    Settle,
+    /// O §2.5 as published: `slump_iterations` (En) passes over the labelled cells around
+    /// this frame's contact only, ring by ring from the rim outward. Its limitation: En
+    /// passes cannot carry away what a dragged body pushes ahead of it, and an old rim that
+    /// leaves the labelled region is never slumped again, so a dragged body can leave single
+    /// cells metres tall (`tests/tests/ground_settle.rs` measures it).
     Labelled,
     /// The same slope rule over the whole field, in every direction, iterated until nothing
     /// moves (at most `max_relax_iterations`): the converged answer O's shortcut approximates.
@@ -341,7 +359,7 @@ mod tests {
         .unwrap();
         p.validate().unwrap();
         assert_eq!(p.material.values().repose_degrees, 90.0);
-        assert_eq!(p.relaxation, Relaxation::Labelled);
+        assert_eq!(p.relaxation, Relaxation::Settle);
         assert_eq!(p.height_unit, 1e-5);
         assert_eq!(p.origin(), Vec2::ZERO);
         assert!((p.cell() - 0.01).abs() < 1e-7);
