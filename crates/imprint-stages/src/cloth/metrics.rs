@@ -65,7 +65,7 @@ pub struct ClothFrameMetrics {
 
 /// What a GPU frame reports: the subset of [`super::ClothFrameMetrics`] that per-particle
 /// flags give without a reduction on the GPU, and the residual contacts, measured on the GPU
-/// after the frame's last substep. [`ClothSim::adopt_gpu_frame_resident`] completes it
+/// after the frame's last substep. [`super::ClothSim::adopt_gpu_frame_resident`] completes it
 /// (strain, energies) from the state read back once per frame without any field on the CPU;
 /// [`super::ClothSim::adopt_gpu_frame`] does the same but measures the residual contacts again on
 /// the CPU against CPU copies of the end-of-frame fields.

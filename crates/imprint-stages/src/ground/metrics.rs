@@ -24,11 +24,12 @@ pub struct GroundFrameMetrics {
     pub mass_volume: f64,
     /// Cells the outer contour map labelled (the slump's domain in `Labelled` mode).
     pub labelled_cells: u32,
-    /// Cell visits of the slump, summed over its passes (`Labelled`: the cells of each ring
-    /// per pass; `Full`: the cells of the region swept per iteration).
+    /// Cell visits of the slump, summed over its passes (`Settle`: cells taken off the work
+    /// list; `Labelled`: the cells of each ring per pass; `Full`: the cells of the region
+    /// swept per iteration).
     pub slump_visits: u64,
-    /// Slump passes run: at most En in `Labelled` (fewer when one moves nothing), the
-    /// iterations to rest in `Full`.
+    /// Slump passes run: 1 for `Settle` (one work list), at most En in `Labelled` (fewer
+    /// when one moves nothing), the iterations to rest in `Full`.
     pub slump_iterations: u32,
     /// Material the slump moved, units.
     pub slumped_units: i64,

@@ -19,7 +19,17 @@
 //!    one unit at a time in a fixed order), so with α = 1 mass is conserved exactly.
 //! 4. **Outer contour map** (O §2.4): around the contact, the distance from it, rim = 0,
 //!    for `slump_band` rings (O gives no width).
-//! 5. **Slump** (O §2.5): En passes from the rim outward; step k moves material over the
+//! 5. **Settle** (the default, `Relaxation::Settle`, `settle.rs`): a work list that starts
+//!    from every cell the frame changed (this frame's window, last frame's released contact,
+//!    cells a layer was added to) moves whole units from a cell to its steepest free lower
+//!    neighbour while the difference exceeds T + one unit, and queues what it touched, until
+//!    nothing is steeper anywhere the ground changed. Cost grows with the cells that move;
+//!    each move lowers Σh², so it ends. O's slump below visits only this frame's labelled
+//!    cells En times, which cannot spread what a dragged body pushes ahead of it (a dragged
+//!    box left 35 cm steps between neighbours, `tests/ground_settle.rs`); it stays as
+//!    `Relaxation::Labelled`.
+//!
+//!    **Slump** (O §2.5, `Labelled`): En passes from the rim outward; step k moves material over the
 //!    edges of ring k (to ring k + 1, and along ring k) wherever a neighbour difference
 //!    exceeds T = tan θ · cell, sharing each cell's excess so that nothing overshoots. Only
 //!    labelled cells are visited. O moves material outward only; we also let it run along a
@@ -42,6 +52,7 @@
 //! Read in this order: [`params`] (what a pipeline file says, and its validation);
 //! [`contact`] (step 1, and the grid and window types); [`contour`] (steps 2 and 4);
 //! [`cpu`] ([`GroundSim`]: steps 3 and 5, the `Full` relaxation, the heightmap loader);
+//! `settle` (step 5's default);
 //! [`metrics`] (what each frame reports).
 //!
 //! ```

@@ -1,5 +1,5 @@
 //! `DistanceField`: the narrow-band distance field of a boundary, built on keyframes, split
-//! over frames, or built ahead and interpolated ([`builds`]); its error against the exact
+//! over frames, or built ahead and interpolated (`builds.rs`); its error against the exact
 //! distance measured on the frames `measure` names.
 
 mod builds;
