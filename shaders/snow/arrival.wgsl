@@ -45,66 +45,68 @@ const MAX_BIAS_SLOPE: f32 = 8.0;
 // f32::MAX (not +inf, which a compiler may assume away).
 const UNCOVERED: f32 = 3.40282347e38;
 
-@compute @workgroup_size(64)
-fn lookup(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let r = thread_index(gid, nwg);
-    if r >= lp.receivers {
-        return;
-    }
+// Where receiver `r` falls in the view: its texel and its depth along the view, or `ok`
+// false when it faces away from the fall (or its normal is NaN).
+struct Look {
+    ok: bool,
+    i: u32,
+    j: u32,
+    depth: f32,
+    c: f32,
+}
+
+fn look(r: u32) -> Look {
+    var l: Look;
     let n = normals[r].xyz;
-    let c = -dot(n, lp.dir.xyz);
+    l.c = -dot(n, lp.dir.xyz);
     // `!(c > 0)` also refuses NaN.
-    if !(c > 0.0) {
-        return;
-    }
+    l.ok = l.c > 0.0;
     let q = points[r].xyz - lp.eye.xyz;
     let v = vec3<f32>(dot(q, lp.right.xyz), dot(q, lp.up.xyz), dot(q, lp.forward.xyz));
     let px = lp.centre + v.x * lp.k;
     let py = lp.centre - v.y * lp.k;
     let last = f32(lp.res) - 1.0;
-    let i = u32(clamp(floor(px), 0.0, last));
-    let j = u32(clamp(floor(py), 0.0, last));
-    let seen = depth_map[j * lp.res + i];
+    l.i = u32(clamp(floor(px), 0.0, last));
+    l.j = u32(clamp(floor(py), 0.0, last));
+    l.depth = v.z;
+    return l;
+}
+
+// Counts receiver `r` when nothing nearer than its biased depth was `seen` at its texel.
+fn count_if_reached(r: u32, l: Look, seen: f32) {
     var reached = true;
     if seen != UNCOVERED {
-        let tan = min(sqrt(max(1.0 - c * c, 0.0)) / c, MAX_BIAS_SLOPE);
-        reached = v.z <= seen + lp.texel * (lp.bias_texels + tan);
+        let tan = min(sqrt(max(1.0 - l.c * l.c, 0.0)) / l.c, MAX_BIAS_SLOPE);
+        reached = l.depth <= seen + lp.texel * (lp.bias_texels + tan);
     }
     if reached {
         counts[r] += 1u;
     }
 }
 
+@compute @workgroup_size(64)
+fn lookup(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let r = thread_index(gid, nwg);
+    if r >= lp.receivers {
+        return;
+    }
+    let l = look(r);
+    if l.ok {
+        count_if_reached(r, l, depth_map[l.j * lp.res + l.i]);
+    }
+}
+
 // `lookup` on a depth map left where the rasteriser rendered it: the same test, the texel
-// read from `texels` (nothing uploaded).
+// read from `texels` (nothing uploaded): the depth where covered, UNCOVERED elsewhere.
 @compute @workgroup_size(64)
 fn lookup_resident(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let r = thread_index(gid, nwg);
     if r >= lp.receivers {
         return;
     }
-    let n = normals[r].xyz;
-    let c = -dot(n, lp.dir.xyz);
-    // `!(c > 0)` also refuses NaN.
-    if !(c > 0.0) {
-        return;
-    }
-    let q = points[r].xyz - lp.eye.xyz;
-    let v = vec3<f32>(dot(q, lp.right.xyz), dot(q, lp.up.xyz), dot(q, lp.forward.xyz));
-    let px = lp.centre + v.x * lp.k;
-    let py = lp.centre - v.y * lp.k;
-    let last = f32(lp.res) - 1.0;
-    let i = u32(clamp(floor(px), 0.0, last));
-    let j = u32(clamp(floor(py), 0.0, last));
-    // The value the host path uploads: the depth where covered, UNCOVERED elsewhere.
-    let t = texels[j * lp.row_texels + i];
-    let seen = select(UNCOVERED, t.x, t.y > 0.5);
-    var reached = true;
-    if seen != UNCOVERED {
-        let tan = min(sqrt(max(1.0 - c * c, 0.0)) / c, MAX_BIAS_SLOPE);
-        reached = v.z <= seen + lp.texel * (lp.bias_texels + tan);
-    }
-    if reached {
-        counts[r] += 1u;
+    let l = look(r);
+    if l.ok {
+        let t = texels[l.j * lp.row_texels + l.i];
+        count_if_reached(r, l, select(UNCOVERED, t.x, t.y > 0.5));
     }
 }

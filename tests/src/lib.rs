@@ -100,6 +100,38 @@ pub mod ground {
     use imprint_stages::ground::{GroundFrameMetrics, GroundParams, GroundSim, Initial, Material};
     use std::time::Instant;
 
+    /// The largest difference between 4-neighbours neither in contact this frame, units.
+    pub fn worst_free_difference(g: &GroundSim) -> i64 {
+        let dims = g.grid().dims;
+        let nx = dims.x as usize;
+        let mut held = vec![false; g.heights_units().len()];
+        if let Some(maps) = g.maps() {
+            let (win, w) = (maps.window, maps.window.w as usize);
+            for (j, _) in maps.contact.iter().enumerate().filter(|c| *c.1) {
+                held[win.global((j % w) as u32, (j / w) as u32, dims.x)] = true;
+            }
+        }
+        let h = g.heights_units();
+        let mut d = 0i64;
+        for j in 0..h.len() {
+            if held[j] {
+                continue;
+            }
+            let mut pair = |n: usize| {
+                if !held[n] {
+                    d = d.max((h[j] as i64 - h[n] as i64).abs());
+                }
+            };
+            if j % nx + 1 < nx {
+                pair(j + 1);
+            }
+            if j + nx < h.len() {
+                pair(j + nx);
+            }
+        }
+        d
+    }
+
     /// A flat field of `n × n` cells of `cell` m centred on the origin, `h0` m high.
     pub fn params(n: u32, cell: f32, h0: f32, material: Material) -> GroundParams {
         let mut p = GroundParams::new([n as f32 * cell; 2], [n, n], material);

@@ -7,7 +7,7 @@
 use glam::Vec3;
 use imprint_core::Error;
 use imprint_stages::ground::{GroundSim, Material, Preset, Relaxation};
-use imprint_tests::ground::{cuboid_at, params, roll, sim};
+use imprint_tests::ground::{cuboid_at, params, roll, sim, worst_free_difference};
 
 const N: u32 = 240;
 const CELL: f32 = 0.005;
@@ -24,38 +24,6 @@ struct Worst {
     top_units: i32,
     /// Tallest cell in the frames after the body has left the ground, units.
     end_top_units: i32,
-}
-
-/// The largest difference between 4-neighbours neither in contact this frame, units.
-fn worst_free_difference(g: &GroundSim) -> i64 {
-    let dims = g.grid().dims;
-    let nx = dims.x as usize;
-    let mut held = vec![false; g.heights_units().len()];
-    if let Some(maps) = g.maps() {
-        let (win, w) = (maps.window, maps.window.w as usize);
-        for (j, _) in maps.contact.iter().enumerate().filter(|c| *c.1) {
-            held[win.global((j % w) as u32, (j / w) as u32, dims.x)] = true;
-        }
-    }
-    let h = g.heights_units();
-    let mut d = 0i64;
-    for j in 0..h.len() {
-        if held[j] {
-            continue;
-        }
-        let mut pair = |n: usize| {
-            if !held[n] {
-                d = d.max((h[j] as i64 - h[n] as i64).abs());
-            }
-        };
-        if j % nx + 1 < nx {
-            pair(j + 1);
-        }
-        if j + nx < h.len() {
-            pair(j + nx);
-        }
-    }
-    d
 }
 
 /// The box pressed a third of its height into flat sand, dragged 0.45 m along x in 24

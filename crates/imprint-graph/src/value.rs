@@ -121,15 +121,12 @@ impl FieldValue {
 
     /// The field on the CPU: computed once per value (a GPU read-back or a blend).
     pub fn cpu(&self, gpu: Option<&GpuContext>) -> Result<Arc<DistanceField>> {
-        if let FieldData::Cpu(f) = &self.data {
-            // Not cached: the producer reuses an unshared field's buffers.
-            return Ok(f.clone());
-        }
         if let Some(f) = self.cpu.get() {
             return Ok(f.clone());
         }
         let f = match &self.data {
-            FieldData::Cpu(f) => f.clone(),
+            // Not cached: the producer reuses an unshared field's buffers.
+            FieldData::Cpu(f) => return Ok(f.clone()),
             FieldData::Gpu(g) => Arc::new(g.to_cpu(need_gpu(gpu)?)?),
             FieldData::Blend { a, b, weight, .. } => Arc::new(DistanceField::blend(a, b, *weight)?),
         };
