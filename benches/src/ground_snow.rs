@@ -45,7 +45,7 @@ fn time_dragged_box(p: &GroundParams) -> (f64, f64, f64, f32) {
     }
     let cell = p.size[0] / p.resolution[0] as f32;
     let tan = (p.material.values().repose_degrees.to_radians() as f64).tan();
-    let slope = worst as f64 * p.height_unit as f64 / cell as f64 / tan;
+    let slope = worst as f64 * p.height_unit / cell as f64 / tan;
     (total / frames.max(1) as f64, max, slope, top)
 }
 
