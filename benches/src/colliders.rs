@@ -12,6 +12,7 @@ use imprint_core::raster::rasterize_depth_with;
 use imprint_core::{BoundaryVariant, GridSpec, Mesh};
 use imprint_stages::cloth::{ClothParams, ClothSim, Collision, Material, Shape};
 use imprint_stages::drape::{DepthCamera, DepthColliderParams, InsideTest};
+use imprint_stages::voxel::cpu::Voxelizer;
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -90,7 +91,10 @@ pub fn section(root: &Path, repeat: usize) -> String {
          deforming body pays it every frame), median of {repeat}; **cloth ms**: median per \
          frame; **inside**: cloth particles inside the cow by the exact inside test (the \
          parity of three axis rays), at the end and the most in any frame; **kinetic**: the \
-         cloth's kinetic energy in the last frame (how well it comes to rest; J).\n",
+         cloth's kinetic energy in the last frame (how well it comes to rest; J). The field \
+         is built signed (the cow is closed: its inside cells are marked, and the cloth takes \
+         a particle found inside out through the nearest surface) and unsigned (the particle \
+         remembers its side), to show what the sign costs and buys.\n",
         cow.triangles.len()
     );
     let _ = writeln!(
@@ -98,25 +102,36 @@ pub fn section(root: &Path, repeat: usize) -> String {
         "| collider | build ms | cloth ms per frame | inside at end | inside, most | contacts at end | kinetic at end |"
     );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
-    // The distance field: 96³ over the cow's box, band 3 (as the pipeline).
+    // The distance field: 96³ over the cow's box, band 3 (as the pipeline); signed (the
+    // default for a closed mesh) and unsigned (the sign's cost, in build and in the cloth).
     let spec = GridSpec::fit(&cow.bounds(), 96, 0.15).expect("grid");
-    let build_field = || {
-        let b = imprint_stages::voxel::voxelize_cpu(&cow, &spec, BoundaryVariant::Closest)
-            .expect("voxelise");
-        imprint_stages::sdf::build_field_cpu(&b, 3.0).expect("field")
-    };
-    let field_ms = crate::median_ms(repeat, || {
-        std::hint::black_box(build_field());
-    });
-    let field = build_field();
-    let o = run(&test, |sim, f| {
-        let t = Instant::now();
-        let m = sim
-            .step_frame(&[&field], &[&field], f, 1.0 / FPS)
-            .expect("field cloth");
-        (t.elapsed().as_secs_f64() * 1e3, m.contacts, m.kinetic)
-    });
-    row(&mut s, "distance field 96³, band 3", field_ms, &o);
+    for signed in [true, false] {
+        let mut vox = Voxelizer::new(spec).expect("voxeliser");
+        vox.signed = signed;
+        let mut build_field = || {
+            let b = vox.run(&cow, BoundaryVariant::Closest).expect("voxelise");
+            imprint_stages::sdf::build_field_cpu(&b, 3.0).expect("field")
+        };
+        let field_ms = crate::median_ms(repeat, || {
+            std::hint::black_box(build_field());
+        });
+        let field = build_field();
+        assert_eq!(field.inside.is_some(), signed);
+        let o = run(&test, |sim, f| {
+            let t = Instant::now();
+            let m = sim
+                .step_frame(&[&field], &[&field], f, 1.0 / FPS)
+                .expect("field cloth");
+            (t.elapsed().as_secs_f64() * 1e3, m.contacts, m.kinetic)
+        });
+        let label = if signed { "signed" } else { "unsigned" };
+        row(
+            &mut s,
+            &format!("distance field 96³, band 3, {label}"),
+            field_ms,
+            &o,
+        );
+    }
     for res in [256, 512] {
         let params = DepthColliderParams {
             views: vec![Vec3::NEG_Y, Vec3::NEG_Z, Vec3::X],

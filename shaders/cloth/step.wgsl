@@ -74,8 +74,10 @@ struct FieldHeader {
     far_value: f32,
     // 0: no field in this slot (a start slot when the fields are not blended).
     present: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // Offset of the slot's inside bits in `signs` (words).
+    sign_offset: u32,
+    // 1: the field is signed (its inside bits are in `signs`).
+    signed: u32,
 }
 
 // Per particle, accumulated over a frame's substeps (zeroed at the frame's start).
@@ -121,6 +123,8 @@ const F32_MAX: f32 = 3.40282347e38;
 @group(0) @binding(10) var<storage, read> headers: array<FieldHeader>;
 @group(0) @binding(11) var<storage, read> cells: array<vec4<f32>>;
 @group(0) @binding(12) var<storage, read> hinges: array<Hinge>;
+// The signed slots' inside bits (DistanceField::inside), one bitset per slot at its offset.
+@group(0) @binding(13) var<storage, read> signs: array<u32>;
 
 fn finite3(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3<f32>(F32_MAX));
@@ -146,6 +150,16 @@ struct Sample {
     distance: f32,
     vector: vec3<f32>,
     in_band: bool,
+    // For a signed field: the blend of the cells' signed distances (DistanceField::side).
+    signed: bool,
+    side: f32,
+}
+
+// The signed distance of cell `c` of slot h, given its stored distance w (negated when far).
+fn signed_cell(h: FieldHeader, c: vec3<i32>, w: f32) -> f32 {
+    let i = cell_index(h, c) - h.dims.w;
+    let word = signs[h.sign_offset + i / 32u];
+    return select(abs(w), -abs(w), ((word >> (i % 32u)) & 1u) == 1u);
 }
 
 fn cell_index(h: FieldHeader, c: vec3<i32>) -> u32 {
@@ -160,18 +174,24 @@ fn sample_field(slot: u32, p: vec3<f32>) -> Sample {
     let fl = floor(c);
     let t = c - fl;
     let dims = vec3<i32>(h.dims.xyz);
+    let signed = h.signed == 1u;
     if !finite3(c) {
-        return Sample(h.far_value, vec3<f32>(0.0), false);
+        return Sample(h.far_value, vec3<f32>(0.0), false, signed, h.far_value);
     }
     let b = vec3<i32>(fl);
     if any(b < vec3<i32>(0)) || any(b + vec3<i32>(1) >= dims) {
-        // Outside the grid or in its outermost half cell: the nearest cell.
+        // Outside the grid or in its outermost half cell: the nearest cell (beyond the grid,
+        // outside the body).
         let cl = vec3<i32>(round_away(c));
         if any(cl < vec3<i32>(0)) || any(cl >= dims) {
-            return Sample(h.far_value, vec3<f32>(0.0), false);
+            return Sample(h.far_value, vec3<f32>(0.0), false, signed, h.far_value);
         }
         let v = cells[cell_index(h, cl)];
-        return Sample(abs(v.w), v.xyz, v.w >= 0.0);
+        var sd = 0.0;
+        if signed {
+            sd = signed_cell(h, cl, v.w);
+        }
+        return Sample(abs(v.w), v.xyz, v.w >= 0.0, signed, sd);
     }
     let wx = vec2<f32>(1.0 - t.x, t.x);
     let wy = vec2<f32>(1.0 - t.y, t.y);
@@ -179,18 +199,23 @@ fn sample_field(slot: u32, p: vec3<f32>) -> Sample {
     var acc = vec4<f32>(0.0);
     var dist = 0.0;
     var far = false;
+    var sd = 0.0;
     for (var k = 0u; k < 8u; k++) {
         let o = vec3<u32>(k & 1u, (k >> 1u) & 1u, (k >> 2u) & 1u);
         let w = wx[o.x] * wy[o.y] * wz[o.z];
-        let v = cells[cell_index(h, b + vec3<i32>(o))];
+        let cc = b + vec3<i32>(o);
+        let v = cells[cell_index(h, cc)];
         acc += w * v;
         dist += w * abs(v.w);
         far = far || v.w < 0.0;
+        if signed {
+            sd += w * signed_cell(h, cc, v.w);
+        }
     }
     if !far {
-        return Sample(length(acc.xyz), acc.xyz, true);
+        return Sample(length(acc.xyz), acc.xyz, true, signed, sd);
     }
-    return Sample(dist, acc.xyz, false);
+    return Sample(dist, acc.xyz, false, signed, sd);
 }
 
 struct Signed {
@@ -200,11 +225,26 @@ struct Signed {
     band_miss: bool,
 }
 
-// contact::classify: a sample read as signed, given the particle's side memory.
+// contact::classify: a sample read as signed, by the field's sign or else by the particle's
+// side memory.
 fn classify(f: Sample, side_k: vec4<f32>, reach: f32, band_miss: bool) -> Signed {
     let d = f.distance;
     let v = f.vector;
-    if !(abs(d) <= F32_MAX && any(v != vec3<f32>(0.0))) {
+    let known = abs(d) <= F32_MAX && any(v != vec3<f32>(0.0));
+    if f.signed {
+        if f.side < 0.0 {
+            if known {
+                return Signed(true, -d, v, band_miss);
+            }
+            // Deeper than the band: inside, no direction.
+            return Signed(abs(f.side) <= F32_MAX, f.side, vec3<f32>(0.0), band_miss);
+        }
+        if known {
+            return Signed(true, d, -v, band_miss);
+        }
+        return Signed(false, 0.0, vec3<f32>(0.0), false);
+    }
+    if !known {
         return Signed(false, 0.0, vec3<f32>(0.0), false);
     }
     if side_k.w > 0.0 && dot(v, side_k.xyz) > 0.0 && d < reach {
@@ -253,6 +293,8 @@ fn signed_sample(k: u32, x: vec3<f32>, x_from: vec3<f32>, side_k: vec4<f32>) -> 
         a.distance + (b.distance - a.distance) * s,
         a.vector + (b.vector - a.vector) * s,
         false,
+        a.signed && b.signed,
+        a.side + (b.side - a.side) * s,
     );
     return classify(f, side_k, reach0, false);
 }
@@ -466,6 +508,15 @@ fn substep(
             continue;
         }
         // contact::respond.
+        if sd.distance < 0.0 && all(sd.outward == vec3<f32>(0.0)) {
+            // Inside a signed field, deeper than its band: undo the step.
+            x = x0;
+            hits += 1u;
+            inside += 1u;
+            st.max_depth = max(st.max_depth, eps - sd.distance);
+            st.band_misses += u32(sd.band_miss);
+            continue;
+        }
         side[si] = vec4<f32>(sd.outward, 1.0);
         if sd.distance >= eps {
             continue;

@@ -321,6 +321,7 @@ fn grid_beyond_device_limits_is_an_error() {
                     owner: ctx.zeroed_buffer("tiny", 16).unwrap(),
                     faces: ctx.zeroed_buffer("tiny", 48).unwrap(),
                     faces_world: Default::default(),
+                    inside: None,
                 },
                 2.0,
             )
@@ -351,7 +352,15 @@ fn report_timings_sphere_64() {
     for variant in VARIANTS {
         for round in 0..3 {
             let mut timer = GpuTimer::new(ctx);
-            let b = voxelize_gpu_timed(ctx, &mesh, &spec, variant, Some(&mut timer)).unwrap();
+            let b = voxelize_gpu_timed(
+                ctx,
+                &mesh,
+                &spec,
+                variant,
+                mesh.is_closed(),
+                Some(&mut timer),
+            )
+            .unwrap();
             let tv = timer.wait(ctx).unwrap();
             let f = build_field_gpu_timed(ctx, &b, 3.0, Some(&mut timer)).unwrap();
             let tf = timer.wait(ctx).unwrap();

@@ -30,6 +30,16 @@ pub struct Boundary {
     /// The triangle (world vertices) that owns each point: the surface triangle closest to the
     /// cell centre, smallest index on ties. The field refines its distances with it.
     pub faces: Vec<[Vec3; 3]>,
+    /// Which cell centres lie inside the mesh (a bitset over the grid, [`bit`]), when the mesh
+    /// is closed; `None` for an open mesh, whose inside is undefined: its field is unsigned.
+    #[serde(default)]
+    pub inside: Option<Vec<u32>>,
+}
+
+/// Bit `i` of a bitset stored as 32-bit words (bit `i % 32` of word `i / 32`).
+#[inline(always)]
+pub fn bit(words: &[u32], i: usize) -> bool {
+    words[i / 32] >> (i % 32) & 1 == 1
 }
 
 impl Boundary {
@@ -83,6 +93,10 @@ pub struct DistanceField {
     pub points: Arc<Vec<Vec3>>,
     /// The owning triangle of each point, when distances are refined to the triangles.
     pub faces: Option<Arc<Vec<[Vec3; 3]>>>,
+    /// Which cell centres lie inside the body (a bitset, [`bit`]): the field is *signed*. `None`
+    /// for an open mesh: unsigned, and a consumer must guess the side (see the cloth's contact).
+    #[serde(default)]
+    pub inside: Option<Arc<Vec<u32>>>,
     /// [`DistanceField::cells`], once asked for (write `Default::default()` when building).
     /// Not serialised: a cache of the fields above, empty after loading.
     #[serde(skip)]
@@ -137,6 +151,7 @@ impl DistanceField {
             nearest,
             points: Arc::new(points),
             faces: None,
+            inside: None,
             cells: Default::default(),
         }
     }
@@ -177,7 +192,9 @@ impl DistanceField {
     /// `b`): what a body between two builds looks like (H eq. 13-14). Per cell, the distance
     /// is `a + (b - a) s` exactly and the closest-point vector is blended the same way (the
     /// cell's blended closest point becomes its own boundary point); cells far in both stay
-    /// far.
+    /// far. When both fields are signed, the *signed* distances are blended (a cell the surface
+    /// passed between the builds is inside where the blend is negative, and its distance is
+    /// the blend's size, which is what the blended vector measures too).
     pub fn blend(a: &DistanceField, b: &DistanceField, s: f32) -> crate::Result<DistanceField> {
         if a.spec != b.spec || a.band != b.band {
             return Err(crate::Error::Invalid(format!(
@@ -187,10 +204,16 @@ impl DistanceField {
         }
         let spec = a.spec;
         let (ca, cb) = (a.cells(), b.cells());
+        let signed = a.inside.is_some() && b.inside.is_some();
         let blended: Vec<(f32, Option<Vec3>)> = (0..spec.len())
             .into_par_iter()
             .map(|i| {
-                let d = a.dist[i] + (b.dist[i] - a.dist[i]) * s;
+                let d = if signed {
+                    let (sa, sb) = (a.signed_distance(i), b.signed_distance(i));
+                    sa + (sb - sa) * s
+                } else {
+                    a.dist[i] + (b.dist[i] - a.dist[i]) * s
+                };
                 if a.is_far(i) && b.is_far(i) {
                     return (d, None);
                 }
@@ -201,8 +224,14 @@ impl DistanceField {
         let mut points = Vec::new();
         let mut nearest = Vec::with_capacity(spec.len());
         let mut dist = Vec::with_capacity(spec.len());
-        for (d, p) in blended {
-            dist.push(d);
+        let mut inside = signed.then(|| vec![0u32; spec.len().div_ceil(32)]);
+        for (i, (d, p)) in blended.into_iter().enumerate() {
+            if let Some(words) = &mut inside
+                && d < 0.0
+            {
+                words[i / 32] |= 1 << (i % 32);
+            }
+            dist.push(d.abs());
             nearest.push(match p {
                 Some(p) => {
                     points.push(p);
@@ -218,8 +247,52 @@ impl DistanceField {
             nearest,
             points: Arc::new(points),
             faces: None,
+            inside: inside.map(Arc::new),
             cells: Default::default(),
         })
+    }
+
+    /// Whether cell `index`'s centre is inside the body: `None` for an unsigned field.
+    #[inline]
+    pub fn is_inside(&self, index: usize) -> Option<bool> {
+        self.inside.as_deref().map(|w| bit(w, index))
+    }
+
+    /// The distance of cell `index`, negative inside (the distance itself when unsigned).
+    #[inline]
+    pub fn signed_distance(&self, index: usize) -> f32 {
+        match self.is_inside(index) {
+            Some(true) => -self.dist[index],
+            _ => self.dist[index],
+        }
+    }
+
+    /// The trilinear blend of the cells' signed distances at `p` (far cells count as the band's
+    /// edge, with their sign): negative inside, to within the curvature of the surface over a
+    /// cell (exact for a plane). In the grid's outermost half cell, the nearest cell's; beyond
+    /// the grid, outside (the grid holds the body). `None` for an unsigned field.
+    pub fn side(&self, p: Vec3) -> Option<f32> {
+        self.inside.as_ref()?;
+        let c = self.spec.to_cell(p);
+        let b = c.floor().as_ivec3();
+        let t = c - c.floor();
+        if b.cmplt(glam::IVec3::ZERO).any() || (b + 1).cmpge(self.spec.dims.as_ivec3()).any() {
+            let cl = c.round().as_ivec3();
+            return Some(if self.spec.contains(cl) {
+                self.signed_distance(self.spec.index(cl.as_uvec3()))
+            } else {
+                self.far_value()
+            });
+        }
+        let mut sd = 0.0;
+        for k in 0..8u32 {
+            let o = UVec3::new(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+            let w = (if o.x == 1 { t.x } else { 1.0 - t.x })
+                * (if o.y == 1 { t.y } else { 1.0 - t.y })
+                * (if o.z == 1 { t.z } else { 1.0 - t.z });
+            sd += w * self.signed_distance(self.spec.index(b.as_uvec3() + o));
+        }
+        Some(sd)
     }
 
     /// The distance stored in far cells: the band's half-width in world units.

@@ -18,6 +18,37 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Whether every edge borders an even number of triangles (by vertex index, or else by
+    /// position): the triangles then bound closed pieces, so "inside" means something and the
+    /// parity of a ray's crossings changes only across the surface.
+    pub fn is_closed(&self) -> bool {
+        use rayon::slice::ParallelSliceMut;
+        fn even<K: Ord + Copy + Send>(mut edges: Vec<(K, K)>) -> bool {
+            for e in &mut edges {
+                if e.1 < e.0 {
+                    *e = (e.1, e.0);
+                }
+            }
+            edges.par_sort_unstable();
+            edges.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
+        }
+        let by_index = self
+            .triangles
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        even(by_index) || {
+            let key = |v: Vec3| v.to_array().map(f32::to_bits);
+            let by_position = (0..self.triangles.len())
+                .flat_map(|t| {
+                    let [a, b, c] = self.triangle(t).map(key);
+                    [(a, b), (b, c), (c, a)]
+                })
+                .collect();
+            even(by_position)
+        }
+    }
+
     /// Builds a mesh from positions and triangles, validating it and computing normals.
     /// `source` names the mesh in errors (a path or a primitive's name).
     pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, source: &str) -> Result<Self> {

@@ -876,6 +876,7 @@ mod tests {
             nearest,
             points: Arc::new(vec![Vec3::ZERO]),
             faces: None,
+            inside: None,
             cells: Default::default(),
         });
         let obj = Object::FieldSlice {

@@ -252,6 +252,7 @@ fn field() -> Arc<DistanceField> {
         nearest,
         points: Arc::new(vec![Vec3::ZERO]),
         faces: None,
+        inside: None,
         cells: Default::default(),
     })
 }

@@ -9,6 +9,7 @@ use crate::value::{BoundaryValue, MeshIn, Value};
 use imprint_core::{BoundaryVariant, Error, GridSpec};
 use imprint_gpu::GpuContext;
 use imprint_stages::voxel::cpu::Voxelizer;
+use imprint_stages::voxel::solid::ClosedCache;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
@@ -22,6 +23,11 @@ pub struct VoxelizeNode {
     /// `Closest` (sub-voxel, default) or `Centre` (H's voxel centres).
     #[serde(default)]
     pub variant: BoundaryVariant,
+    /// Mark the cells inside the mesh, so that its distance field is signed (the cloth then
+    /// knows a particle that got inside and takes it out the nearest way). Only a closed mesh
+    /// has an inside: an open one gives an unsigned field, and the report says so.
+    #[serde(default = "defaults::yes")]
+    pub signed: bool,
     #[serde(default)]
     pub backend: Option<Backend>,
     /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
@@ -152,9 +158,15 @@ impl Node for VoxelizeNode {
             input: ctx.mesh_in(&self.mesh),
             spec,
             variant: self.variant,
+            signed: self.signed,
+            closed: ClosedCache::default(),
             path: match gpu {
                 Some(gpu) => VoxelPath::Gpu(gpu),
-                None => VoxelPath::Cpu(Box::new(Voxelizer::new(spec)?)),
+                None => {
+                    let mut vox = Voxelizer::new(spec)?;
+                    vox.signed = false;
+                    VoxelPath::Cpu(Box::new(vox))
+                }
             },
         }))
     }
@@ -167,6 +179,9 @@ struct VoxelizeStage {
     input: MeshIn,
     spec: GridSpec,
     variant: BoundaryVariant,
+    signed: bool,
+    /// Whether the mesh is closed, checked again only when its triangles change.
+    closed: ClosedCache,
     path: VoxelPath,
 }
 
@@ -182,14 +197,36 @@ impl Stage for VoxelizeStage {
             return Ok(Step::idle());
         }
         let mesh = ctx.values.mesh(&self.input)?;
+        let signed = self.signed && self.closed.is_closed(mesh);
+        if self.signed && ctx.first {
+            ctx.metric("signed", signed);
+            if !signed {
+                ctx.metric(
+                    "unsigned_because",
+                    format!(
+                        "mesh '{}' is open (some edge borders an odd number of triangles): \
+                         its distance field is unsigned, so the cloth guesses which side a \
+                         particle is on (close the mesh's holes to sign it)",
+                        self.input.node()
+                    ),
+                );
+            }
+        }
         let b = match &mut self.path {
             VoxelPath::Gpu(gpu) => {
-                let b =
-                    imprint_stages::voxel::gpu::voxelize_gpu(gpu, mesh, &self.spec, self.variant)?;
+                let b = imprint_stages::voxel::gpu::voxelize_gpu_timed(
+                    gpu,
+                    mesh,
+                    &self.spec,
+                    self.variant,
+                    signed,
+                    None,
+                )?;
                 gpu.wait()?;
                 BoundaryValue::Gpu(Arc::new(b))
             }
             VoxelPath::Cpu(vox) => {
+                vox.signed = signed;
                 let b = vox.run(mesh, self.variant)?;
                 ctx.metric("boundary_points", b.len());
                 BoundaryValue::Cpu(Arc::new(b))

@@ -1,10 +1,18 @@
 //! Contact with the bodies' distance fields (H §5.1, §5.3) and the ground plane.
 //!
-//! **Which side.** The fields are *unsigned*: a sample says how far the closest surface point
-//! is and where (the vector points to it), not which side the particle is on. Near a surface
-//! the interpolated vector is -(signed distance) x normal, so it turns round when the particle
-//! crosses. Each particle therefore remembers, per field, the outward direction at its last
-//! sample in the band, and reads a sample as:
+//! **Which side.** A field built from a closed mesh is *signed* (its cells know whether they
+//! lie inside, [`imprint_core::DistanceField::inside`]): the blend of the cells' signed
+//! distances at the particle says which side it is on, to within the surface's curvature over a
+//! cell. Inside, the closest-point vector points to the nearest surface, which is the way out:
+//! a particle that got into a thin part (an ear, a horn) leaves through the wall it is
+//! nearest to, never through the far one. Deeper than the band (no vector), it goes back to
+//! where it was at the substep's start.
+//!
+//! An open mesh has no inside, and its field is *unsigned*: a sample says how far the closest
+//! surface point is and where (the vector points to it), not which side the particle is on.
+//! Near a surface the interpolated vector is -(signed distance) x normal, so it turns round
+//! when the particle crosses. Each particle therefore remembers, per field, the outward
+//! direction at its last sample in the band, and reads an unsigned sample as:
 //! - vector against that outward direction → outside, signed distance +d;
 //! - vector along it, and the surface within reach (the particle's own step this substep,
 //!   plus 2ε for the body's, plus how far the closest point moved between the two fields
@@ -26,7 +34,7 @@
 //! distance ε (eq. 11), then a fraction b of the substep's tangential displacement is
 //! cancelled (eq. 12, as METHODS reads it).
 
-use super::sampler::FieldView;
+use super::sampler::{FieldView, Read};
 use glam::{Vec3, Vec4};
 use imprint_core::FieldSample;
 
@@ -60,11 +68,27 @@ pub struct Signed {
     pub band_miss: bool,
 }
 
-/// Reads one sample as signed, given the particle's memory `side` (xyz the outward direction
-/// at its last sample, w = 1 when known) and how deep a crossing can reach (computed only
-/// when the vector has turned round: `reach()` is the rare path).
+/// Reads one sample as signed: by the field's sign when it has one (`signed`, negative
+/// inside), else by the particle's memory `side` (xyz the outward direction at its last
+/// sample, w = 1 when known) and how deep a crossing can reach (computed only when the vector
+/// has turned round: `reach()` is the rare path). Inside a signed field but deeper than the
+/// band, the outward direction is zero (unknown).
 #[inline(always)]
-fn classify(d: f32, v: Vec3, side: Vec4, reach: impl Fn() -> f32) -> Option<(f32, Vec3)> {
+fn classify(
+    d: f32,
+    v: Vec3,
+    signed: Option<f32>,
+    side: Vec4,
+    reach: impl Fn() -> f32,
+) -> Option<(f32, Vec3)> {
+    if let Some(sd) = signed {
+        return match (sd < 0.0, d.is_finite() && v != Vec3::ZERO) {
+            (true, true) => Some((-d, v)),
+            (true, false) => sd.is_finite().then_some((sd, Vec3::ZERO)),
+            (false, true) => Some((d, -v)),
+            (false, false) => None,
+        };
+    }
     if !(d.is_finite() && v != Vec3::ZERO) {
         return None;
     }
@@ -89,24 +113,26 @@ pub fn signed_sample(
 ) -> Option<Signed> {
     // The particle's own step plus 2ε for the body's.
     let reach = || 2.0 * eps + (x - x_from).length();
-    let b = c.end.sample(x);
-    let one = |f: &FieldSample, reach: &dyn Fn() -> f32, band_miss: bool| {
-        classify(f.distance, f.vector, side, reach).map(|(distance, outward)| Signed {
+    let rb = c.end.read(x);
+    let one = |r: &Read, reach: &dyn Fn() -> f32, band_miss: bool| {
+        let f = &r.sample;
+        classify(f.distance, f.vector, r.side, side, reach).map(|(distance, outward)| Signed {
             distance,
             outward,
             band_miss,
         })
     };
     let s = c.weight(s);
-    let a = match c.start {
-        Some(f0) if s < 1.0 => f0.sample(x),
-        _ => return one(&b, &reach, false),
+    let ra = match c.start {
+        Some(f0) if s < 1.0 => f0.read(x),
+        _ => return one(&rb, &reach, false),
     };
+    let (a, b) = (ra.sample, rb.sample);
     match (a.in_band, b.in_band) {
         (true, true) => {
             // How far the body moved here between the two fields: its closest point did.
             let reach = || reach() + (b.vector - a.vector).length();
-            match (one(&a, &reach, false), one(&b, &reach, false)) {
+            match (one(&ra, &reach, false), one(&rb, &reach, false)) {
                 (Some(p), Some(q)) => {
                     let distance = p.distance + (q.distance - p.distance) * s;
                     // In contact, blend the outward directions as unit vectors, so that the
@@ -125,14 +151,20 @@ pub fn signed_sample(
                 (p, q) => q.or(p),
             }
         }
-        (false, true) => one(&b, &|| reach() + c.end.field.far_value(), true),
-        (true, false) => one(&a, &|| reach() + c.end.field.far_value(), true),
+        (false, true) => one(&rb, &|| reach() + c.end.field.far_value(), true),
+        (true, false) => one(&ra, &|| reach() + c.end.field.far_value(), true),
         (false, false) => {
             // Both at the band's edge: the trilinear blends of the cells, far ones included.
-            let f = FieldSample {
-                distance: a.distance + (b.distance - a.distance) * s,
-                vector: a.vector + (b.vector - a.vector) * s,
-                in_band: false,
+            let f = Read {
+                sample: FieldSample {
+                    distance: a.distance + (b.distance - a.distance) * s,
+                    vector: a.vector + (b.vector - a.vector) * s,
+                    in_band: false,
+                },
+                side: match (ra.side, rb.side) {
+                    (Some(p), Some(q)) => Some(p + (q - p) * s),
+                    _ => None,
+                },
             };
             one(&f, &reach, false)
         }
@@ -159,6 +191,14 @@ pub fn respond(
     eps: f32,
     friction: f32,
 ) -> Option<Hit> {
+    if sample.distance < 0.0 && sample.outward == Vec3::ZERO {
+        // Inside a signed field, deeper than its band: no way out is known; undo the step.
+        *x = x_from;
+        return Some(Hit {
+            depth: eps - sample.distance,
+            inside: true,
+        });
+    }
     *side = sample.outward.extend(1.0);
     if sample.distance >= eps {
         return None;
@@ -205,22 +245,38 @@ mod tests {
         let mut side = Vec4::ZERO;
         let mut x = Vec3::new(0.0, 0.05, 0.0);
         let from = x;
-        let s = classify(0.05, Vec3::new(0.0, -0.05, 0.0), side, || 0.2).unwrap();
+        let s = classify(0.05, Vec3::new(0.0, -0.05, 0.0), None, side, || 0.2).unwrap();
         let hit = respond(&mut x, from, &sig(s), &mut side, eps, 0.0);
         assert!((x.y - 0.1).abs() < 1e-7 && !hit.unwrap().inside);
         assert_eq!(side, Vec4::new(0.0, 0.05, 0.0, 1.0));
         // It then falls through to y = -0.03: the vector now points up, along the outward side.
         let from = x;
         let mut x = Vec3::new(0.0, -0.03, 0.0);
-        let s = classify(0.03, Vec3::new(0.0, 0.03, 0.0), side, || 0.33).unwrap();
+        let s = classify(0.03, Vec3::new(0.0, 0.03, 0.0), None, side, || 0.33).unwrap();
         assert_eq!(s.0, -0.03);
         let hit = respond(&mut x, from, &sig(s), &mut side, eps, 0.0).unwrap();
         assert!(hit.inside);
         assert!((x.y - 0.1).abs() < 1e-7, "{x}");
         assert!((hit.depth - 0.13).abs() < 1e-6);
         // Far deeper than it could have gone in one step: taken to be outside.
-        let s = classify(0.9, Vec3::new(0.0, -0.9, 0.0), side, || 0.3).unwrap();
+        let s = classify(0.9, Vec3::new(0.0, -0.9, 0.0), None, side, || 0.3).unwrap();
         assert_eq!(s.0, 0.9);
+        // A signed field says inside at any depth, whatever the memory: out along the vector.
+        let s = classify(0.9, Vec3::new(0.0, 0.9, 0.0), Some(-0.9), side, || 0.3).unwrap();
+        assert_eq!(s, (-0.9, Vec3::new(0.0, 0.9, 0.0)));
+        let s = classify(
+            0.03,
+            Vec3::new(0.0, -0.03, 0.0),
+            Some(0.03),
+            Vec4::ZERO,
+            || 0.0,
+        );
+        assert_eq!(s, Some((0.03, Vec3::new(0.0, 0.03, 0.0))));
+        // Deeper than the band: inside, no direction; the particle goes back.
+        let s = classify(0.3, Vec3::ZERO, Some(-0.3), side, || 0.3).unwrap();
+        let (from, mut x) = (Vec3::new(0.0, 0.2, 0.0), Vec3::new(0.0, -0.5, 0.0));
+        let hit = respond(&mut x, from, &sig(s), &mut side, eps, 0.0).unwrap();
+        assert!(hit.inside && x == from);
     }
 
     fn sig((distance, outward): (f32, Vec3)) -> Signed {

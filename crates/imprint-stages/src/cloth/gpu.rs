@@ -62,6 +62,8 @@ pub struct GpuCollider {
     pub band: f32,
     /// Per cell `vec4<f32>`: xyz the closest-point vector, w the distance (negated when far).
     pub cells: wgpu::Buffer,
+    /// The field's inside bits when it is signed ([`DistanceField::inside`], `u32` words).
+    pub signs: Option<wgpu::Buffer>,
 }
 
 impl GpuCollider {
@@ -74,6 +76,10 @@ impl GpuCollider {
             spec,
             band: field.band,
             cells: ctx.storage_buffer("cloth collider field", field.cells())?,
+            signs: match &field.inside {
+                Some(words) => Some(ctx.storage_buffer("cloth collider signs", words)?),
+                None => None,
+            },
         })
     }
 
@@ -161,6 +167,8 @@ impl GpuCollider {
             spec,
             band: field.band,
             cells,
+            // The boundary's bits, shared: the field's sign is its boundary's.
+            signs: b.inside.clone(),
         })
     }
 
@@ -228,7 +236,10 @@ struct FieldHeader {
     dims: [u32; 4],
     far_value: f32,
     present: u32,
-    _pad: [u32; 2],
+    /// Offset of the slot's inside bits in `FieldSet::signs`, words.
+    sign_offset: u32,
+    /// 1 when the slot's field is signed.
+    signed: u32,
 }
 
 /// Mirrors `Stats`.
@@ -252,6 +263,8 @@ struct FieldSet {
     ids: Vec<u64>,
     headers: wgpu::Buffer,
     cells: wgpu::Buffer,
+    /// The signed slots' inside bits, one bitset per slot.
+    signs: wgpu::Buffer,
 }
 
 /// A cloth simulated on the GPU; the state stays there between frames.
@@ -487,6 +500,7 @@ impl GpuCloth {
         }
         let mut headers = Vec::with_capacity(slots.len().max(1));
         let mut offset = 0u64;
+        let mut sign_words = 0u64;
         for s in &slots {
             let mut h = FieldHeader::default();
             if let Some(c) = s {
@@ -494,6 +508,11 @@ impl GpuCloth {
                 h.dims = [c.spec.dims.x, c.spec.dims.y, c.spec.dims.z, offset as u32];
                 h.far_value = c.far_value();
                 h.present = 1;
+                if c.signs.is_some() {
+                    h.signed = 1;
+                    h.sign_offset = sign_words as u32;
+                    sign_words += c.spec.len().div_ceil(32) as u64;
+                }
                 offset += c.spec.len() as u64;
                 if offset >= u32::MAX as u64 {
                     return Err(Error::TooLarge {
@@ -508,20 +527,31 @@ impl GpuCloth {
         if headers.is_empty() {
             headers.push(FieldHeader::default());
         }
-        let cells = match self.fields.take() {
-            Some(f) if f.cells.size() >= offset * 16 => f.cells,
-            _ => ctx.zeroed_buffer("cloth colliders", offset * 16)?,
+        let old = self.fields.take();
+        let (cells, signs) = match old {
+            Some(f) if f.cells.size() >= offset * 16 && f.signs.size() >= sign_words * 4 => {
+                (f.cells, f.signs)
+            }
+            _ => (
+                ctx.zeroed_buffer("cloth colliders", offset * 16)?,
+                ctx.zeroed_buffer("cloth collider signs", sign_words * 4)?,
+            ),
         };
         for (s, h) in slots.iter().zip(&headers) {
             if let Some(c) = s {
                 let bytes = c.spec.len() as u64 * 16;
                 encoder.copy_buffer_to_buffer(&c.cells, 0, &cells, h.dims[3] as u64 * 16, bytes);
+                if let Some(b) = &c.signs {
+                    let words = c.spec.len().div_ceil(32) as u64 * 4;
+                    encoder.copy_buffer_to_buffer(b, 0, &signs, h.sign_offset as u64 * 4, words);
+                }
             }
         }
         self.fields = Some(FieldSet {
             ids,
             headers: ctx.storage_buffer("cloth collider headers", &headers)?,
             cells,
+            signs,
         });
         Ok(())
     }
@@ -675,6 +705,7 @@ impl GpuCloth {
                     (10, &fields.headers),
                     (11, &fields.cells),
                     (12, &self.hinges),
+                    (13, &fields.signs),
                 ],
                 Dispatch::Threads(self.n),
                 timer.as_deref_mut(),
@@ -701,6 +732,7 @@ impl GpuCloth {
                 (9, &self.stats),
                 (10, &fields.headers),
                 (11, &fields.cells),
+                (13, &fields.signs),
             ],
             Dispatch::Threads(self.n),
             timer.as_deref_mut(),

@@ -18,7 +18,17 @@ use imprint_core::{DistanceField, FieldSample, Sampling};
 pub struct FieldView<'a> {
     pub field: &'a DistanceField,
     cells: &'a [Vec4],
+    /// The field's inside bits, when it is signed.
+    signs: Option<&'a [u32]>,
     dims: IVec3,
+}
+
+/// A sample and, for a signed field, the blend of the cells' signed distances
+/// ([`DistanceField::side`]): negative inside.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Read {
+    pub sample: FieldSample,
+    pub side: Option<f32>,
 }
 
 impl<'a> FieldView<'a> {
@@ -27,6 +37,7 @@ impl<'a> FieldView<'a> {
         FieldView {
             field,
             cells: field.cells(),
+            signs: field.inside.as_deref().map(|w| w.as_slice()),
             dims: field.spec.dims.as_ivec3(),
         }
     }
@@ -34,10 +45,16 @@ impl<'a> FieldView<'a> {
     /// The field at `p`, as `Sampling::Vector` reads it.
     #[inline(always)]
     pub fn sample(&self, p: Vec3) -> FieldSample {
+        self.read(p).sample
+    }
+
+    /// The field at `p`, as `Sampling::Vector` reads it, with the side when it is signed.
+    #[inline(always)]
+    pub fn read(&self, p: Vec3) -> Read {
         let spec = &self.field.spec;
         let (b, t) = cell_coords(spec, p);
         if b.cmplt(IVec3::ZERO).any() || (b + 1).cmpge(self.dims).any() {
-            return sample_outside(self.field, p);
+            return read_outside(self.field, p);
         }
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
         let i0 = b.x as usize + nx * b.y as usize + nxy * b.z as usize;
@@ -62,14 +79,35 @@ impl<'a> FieldView<'a> {
             far |= corners[k].w < 0.0;
         }
         let vec = acc.truncate();
+        // The signed distance in the field's order of corners (as `DistanceField::side`).
+        let side = self.signs.map(|words| {
+            let mut sd = 0.0;
+            for k in 0..8 {
+                let i = i0 + (k & 1) + nx * ((k >> 1) & 1) + nxy * (k >> 2);
+                let d = corners[k].w.abs();
+                sd += weights[k]
+                    * if imprint_core::field::bit(words, i) {
+                        -d
+                    } else {
+                        d
+                    };
+            }
+            sd
+        });
         if !far {
-            return finish(0.0, vec, true);
+            return Read {
+                sample: finish(0.0, vec, true),
+                side,
+            };
         }
         let mut dist = 0.0;
         for k in 0..8 {
             dist += weights[k] * corners[k].w.abs();
         }
-        finish(dist, vec, false)
+        Read {
+            sample: finish(dist, vec, false),
+            side,
+        }
     }
 }
 
@@ -124,8 +162,11 @@ fn finish(dist: f32, vec: Vec3, all_in: bool) -> FieldSample {
 /// stays small enough to inline into the particle loop.
 #[cold]
 #[inline(never)]
-fn sample_outside(field: &DistanceField, p: Vec3) -> FieldSample {
-    sample_vector(field, p)
+fn read_outside(field: &DistanceField, p: Vec3) -> Read {
+    Read {
+        sample: sample_vector(field, p),
+        side: field.side(p),
+    }
 }
 
 /// Samples `field` at `p` as [`Sampling::Vector`] does, without the cache: the field's own

@@ -157,37 +157,6 @@ impl CellGrid {
     }
 }
 
-/// Whether every edge borders an even number of triangles (by vertex index, or else by
-/// position): the triangles then bound closed pieces and the ray parity changes only across
-/// the surface.
-fn even_edges(mesh: &Mesh) -> bool {
-    use rayon::slice::ParallelSliceMut;
-    fn even<K: Ord + Copy + Send>(mut edges: Vec<(K, K)>) -> bool {
-        for e in &mut edges {
-            if e.1 < e.0 {
-                *e = (e.1, e.0);
-            }
-        }
-        edges.par_sort_unstable();
-        edges.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
-    }
-    let by_index = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-        .collect();
-    even(by_index) || {
-        let key = |v: Vec3| v.to_array().map(f32::to_bits);
-        let by_position = (0..mesh.triangles.len())
-            .flat_map(|t| {
-                let [a, b, c] = mesh.triangle(t).map(key);
-                [(a, b), (b, c), (c, a)]
-            })
-            .collect();
-        even(by_position)
-    }
-}
-
 impl InsideTest {
     /// The test with its voxel grid of far cells: worth it for many queries spread through
     /// and around the body.
@@ -201,7 +170,7 @@ impl InsideTest {
             || AxisGrid::all(&tris, &bounds),
             || {
                 let finite = tris.iter().flatten().all(|v| v.is_finite());
-                if finite && !tris.is_empty() && !bounds.is_empty() && even_edges(mesh) {
+                if finite && !tris.is_empty() && !bounds.is_empty() && mesh.is_closed() {
                     CellGrid::far_regions(&tris, &bounds)
                 } else {
                     None

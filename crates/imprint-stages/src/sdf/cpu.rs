@@ -99,6 +99,7 @@ impl FieldBuilder {
             owner,
             points: boundary.points.clone(),
             world_faces: refine.then(|| boundary.faces.clone()),
+            inside: boundary.inside.clone(),
         })
     }
 }
@@ -125,6 +126,9 @@ pub struct FieldBuild {
     owner: Option<Vec<u32>>,
     points: Vec<Vec3>,
     world_faces: Option<Vec<[Vec3; 3]>>,
+    /// The boundary's inside cells: the field's sign.
+    #[serde(default)]
+    inside: Option<Vec<u32>>,
 }
 
 impl FieldBuild {
@@ -234,6 +238,7 @@ impl FieldBuild {
             nearest,
             points: Arc::new(self.points),
             faces: self.world_faces.map(Arc::new),
+            inside: self.inside.map(Arc::new),
             cells: Default::default(),
         }
     }

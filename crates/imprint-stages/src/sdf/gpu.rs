@@ -81,6 +81,7 @@ impl GpuField {
             faces: (self.boundary.variant == BoundaryVariant::Closest)
                 .then(|| Arc::new(boundary.faces)),
             points: Arc::new(boundary.points),
+            inside: boundary.inside.map(Arc::new),
             cells: Default::default(),
         })
     }

@@ -7,6 +7,7 @@
 //! are reset only where they were touched, so a `Voxelizer` kept across frames costs time in
 //! proportion to the surface, not the grid.
 
+use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
 use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
@@ -30,6 +31,10 @@ pub struct Voxelizer {
     best: Vec<AtomicU64>,
     /// One bit per cell: touched by some triangle.
     occupied: Vec<AtomicU64>,
+    /// Mark the cells inside a closed mesh ([`Boundary::inside`]: the field's sign); on by
+    /// default, off where nothing reads the sign.
+    pub signed: bool,
+    closed: ClosedCache,
 }
 
 impl Voxelizer {
@@ -40,6 +45,8 @@ impl Voxelizer {
             spec,
             best: (0..n).map(|_| AtomicU64::new(EMPTY)).collect(),
             occupied: (0..n.div_ceil(64)).map(|_| AtomicU64::new(0)).collect(),
+            signed: true,
+            closed: ClosedCache::default(),
         })
     }
 
@@ -160,12 +167,15 @@ impl Voxelizer {
             points.extend(p);
             faces.extend(f);
         }
+        let inside = (self.signed && self.closed.is_closed(mesh))
+            .then(|| super::solid::inside_cells(&spec, &verts, &mesh.triangles));
         Ok(Boundary {
             spec,
             variant,
             cells,
             points,
             faces,
+            inside,
         })
     }
 }

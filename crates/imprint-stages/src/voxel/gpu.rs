@@ -40,6 +40,8 @@ pub struct GpuBoundary {
     pub faces: wgpu::Buffer,
     /// The same faces in world units, kept on the CPU for [`GpuBoundary::to_cpu`].
     pub faces_world: Arc<Vec<[Vec3; 3]>>,
+    /// [`Boundary::inside`]: the bitset of cells inside a closed mesh (`u32` words).
+    pub inside: Option<wgpu::Buffer>,
 }
 
 /// Grid-coordinate vertices of faces, three `vec4`s each, as the shaders read them.
@@ -87,6 +89,10 @@ impl GpuBoundary {
             owner: ctx.storage_buffer("boundary owners", &owner)?,
             faces: ctx.storage_buffer("boundary faces", &faces_in_grid(&spec, &boundary.faces))?,
             faces_world: Arc::new(boundary.faces.clone()),
+            inside: match &boundary.inside {
+                Some(words) => Some(ctx.storage_buffer("boundary inside", words)?),
+                None => None,
+            },
         })
     }
 
@@ -111,12 +117,21 @@ impl GpuBoundary {
             // Only an uploaded Centre boundary that came without faces has none.
             faces.clear();
         }
+        let inside = match &self.inside {
+            Some(b) => {
+                let mut words: Vec<u32> = ctx.read_buffer(b)?;
+                words.truncate(self.spec.len().div_ceil(32));
+                Some(words)
+            }
+            None => None,
+        };
         Ok(Boundary {
             spec: self.spec,
             variant: self.variant,
             cells,
             points,
             faces,
+            inside,
         })
     }
 }
@@ -137,24 +152,29 @@ struct VoxelParams {
     _pad: [u32; 2],
 }
 
-/// The discrete boundary of `mesh` on `spec`, computed on the GPU and left there. The work is
-/// submitted, not waited for: reading it back (or the next stage's submit) orders it.
+/// The discrete boundary of `mesh` on `spec`, computed on the GPU and left there, with its
+/// inside cells when the mesh is closed ([`Mesh::is_closed`], which sorts the edges: a caller
+/// voxelising the same mesh every frame keeps a [`super::solid::ClosedCache`] and calls
+/// [`voxelize_gpu_timed`]). The work is submitted, not waited for: reading it back (or the
+/// next stage's submit) orders it.
 pub fn voxelize_gpu(
     ctx: &GpuContext,
     mesh: &Mesh,
     spec: &GridSpec,
     variant: BoundaryVariant,
 ) -> Result<GpuBoundary> {
-    voxelize_gpu_timed(ctx, mesh, spec, variant, None)
+    voxelize_gpu_timed(ctx, mesh, spec, variant, mesh.is_closed(), None)
 }
 
-/// [`voxelize_gpu`], with its passes timed by `timer` (which then submits; call
-/// [`GpuTimer::wait`] for the timings).
+/// [`voxelize_gpu`], marking the inside cells when `signed` (give it only for a closed mesh),
+/// with its passes timed by `timer` (which then submits; call [`GpuTimer::wait`] for the
+/// timings).
 pub fn voxelize_gpu_timed(
     ctx: &GpuContext,
     mesh: &Mesh,
     spec: &GridSpec,
     variant: BoundaryVariant,
+    signed: bool,
     mut timer: Option<&mut GpuTimer>,
 ) -> Result<GpuBoundary> {
     let dims = spec.dims;
@@ -242,6 +262,18 @@ pub fn voxelize_gpu_timed(
         Dispatch::Threads(n_cells),
         timer.as_deref_mut(),
     );
+    let inside = if signed {
+        Some(record_inside(
+            ctx,
+            &mut encoder,
+            spec,
+            &tri_buf,
+            n_tris,
+            timer.as_deref_mut(),
+        )?)
+    } else {
+        None
+    };
     submit(ctx, encoder, timer);
     Ok(GpuBoundary {
         spec: *spec,
@@ -250,5 +282,70 @@ pub fn voxelize_gpu_timed(
         owner: best_tri,
         faces: tri_buf,
         faces_world: Arc::new(faces_world),
+        inside,
     })
+}
+
+/// Mirrors `SolidParams` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct SolidParams {
+    dims: [u32; 4],
+    n_rows: u32,
+    n_words: u32,
+    n_cells: u32,
+    zero: u32,
+}
+
+/// Records the passes of `shaders/voxel/solid.wgsl` (the CPU's [`super::solid::inside_cells`],
+/// bit for bit) over the triangles `tris` (grid coordinates): the inside bitset.
+fn record_inside(
+    ctx: &GpuContext,
+    encoder: &mut wgpu::CommandEncoder,
+    spec: &GridSpec,
+    tris: &wgpu::Buffer,
+    n_tris: u32,
+    mut timer: Option<&mut GpuTimer>,
+) -> Result<wgpu::Buffer> {
+    let dims = spec.dims;
+    let n_cells = spec.len() as u32;
+    let params = SolidParams {
+        dims: [dims.x, dims.y, dims.z, n_tris],
+        n_rows: dims.y * dims.z,
+        n_words: n_cells.div_ceil(32),
+        n_cells,
+        zero: 0,
+    };
+    let marks = ctx.zeroed_buffer("solid marks", spec.len() as u64 * 4)?;
+    let words = ctx.zeroed_buffer("boundary inside", params.n_words as u64 * 4)?;
+    let p = ctx.uniform_buffer("solid params", &params);
+    let sources = [
+        shader!("common/dispatch.wgsl"),
+        shader!("common/geom.wgsl"),
+        shader!("voxel/solid.wgsl"),
+    ];
+    // Each entry binds what it uses (the layouts are derived from the shader).
+    let passes: [(&str, u32, Vec<(u32, &wgpu::Buffer)>); 3] = [
+        ("mark", n_tris, vec![(0, &p), (1, tris), (2, &marks)]),
+        ("rows", params.n_rows, vec![(0, &p), (2, &marks)]),
+        (
+            "pack",
+            params.n_words,
+            vec![(0, &p), (2, &marks), (3, &words)],
+        ),
+    ];
+    for (entry, n, bind) in passes {
+        let pipeline = ctx.pipeline("solid", &sources, entry)?;
+        let label = format!("solid {entry}");
+        record_pass(
+            ctx,
+            encoder,
+            &label,
+            &pipeline,
+            &bind,
+            Dispatch::Threads(n),
+            timer.as_deref_mut(),
+        );
+    }
+    Ok(words)
 }

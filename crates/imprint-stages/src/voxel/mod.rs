@@ -8,5 +8,6 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod solid;
 
 pub use cpu::voxelize_cpu;
