@@ -49,6 +49,60 @@ impl Mesh {
         }
     }
 
+    /// Closes the mesh's holes: each loop of boundary edges (an edge of one triangle only, by
+    /// vertex index) is filled with a fan around the loop's centroid, wound to match its
+    /// neighbours, so that a scanned body with an open base (the Stanford bunny) has an inside
+    /// and a signed field. Returns the number of holes filled. A loop through a vertex where
+    /// boundaries meet (two ways on) is left open; so is a mesh that is not welded (every
+    /// triangle would be a hole): [`Mesh::is_closed`] tells whether it worked.
+    pub fn close_holes(&mut self) -> usize {
+        use std::collections::{BTreeMap, BTreeSet};
+        let directed: BTreeSet<(u32, u32)> = self
+            .triangles
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        // A boundary edge a → b has no twin b → a; the hole runs the other way, b → a.
+        let mut next: BTreeMap<u32, Option<u32>> = BTreeMap::new();
+        for &(a, b) in &directed {
+            if !directed.contains(&(b, a)) {
+                next.entry(b).and_modify(|n| *n = None).or_insert(Some(a));
+            }
+        }
+        let mut filled = 0;
+        let mut seen = BTreeSet::new();
+        let starts: Vec<u32> = next.keys().copied().collect();
+        for start in starts {
+            let mut lp = Vec::new();
+            let mut v = start;
+            let closed = loop {
+                if !seen.insert(v) {
+                    break v == start && lp.len() >= 3;
+                }
+                lp.push(v);
+                match next.get(&v) {
+                    Some(Some(n)) => v = *n,
+                    _ => break false,
+                }
+            };
+            if !closed {
+                continue;
+            }
+            let c = lp.iter().map(|&i| self.positions[i as usize]).sum::<Vec3>() / lp.len() as f32;
+            let ci = self.positions.len() as u32;
+            self.positions.push(c);
+            for k in 0..lp.len() {
+                self.triangles.push([lp[k], lp[(k + 1) % lp.len()], ci]);
+            }
+            filled += 1;
+        }
+        if filled > 0 {
+            self.uvs = None;
+            self.compute_normals();
+        }
+        filled
+    }
+
     /// Builds a mesh from positions and triangles, validating it and computing normals.
     /// `source` names the mesh in errors (a path or a primitive's name).
     pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, source: &str) -> Result<Self> {
@@ -440,6 +494,38 @@ pub mod primitives {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn signed_volume(m: &Mesh) -> f64 {
+        (0..m.triangles.len())
+            .map(|t| {
+                let [a, b, c] = m.triangle(t);
+                a.dot(b.cross(c)) as f64 / 6.0
+            })
+            .sum()
+    }
+
+    /// A sphere with both polar caps cut off is open; closing its two holes gives a closed,
+    /// outward mesh whose volume is the sphere's less what the flat lids cut.
+    #[test]
+    fn closing_holes_gives_a_closed_outward_mesh() {
+        let s = primitives::uv_sphere(1.0, 32, 16);
+        let pole = |i: u32| s.positions[i as usize].y.abs() > 0.99;
+        let kept: Vec<[u32; 3]> = s
+            .triangles
+            .iter()
+            .filter(|t| !t.iter().any(|&i| pole(i)))
+            .copied()
+            .collect();
+        let mut cut = Mesh::new(s.positions.clone(), kept, "cut sphere").unwrap();
+        assert!(!cut.is_closed());
+        assert_eq!(cut.close_holes(), 2);
+        assert!(cut.is_closed());
+        let full = signed_volume(&s);
+        let v = signed_volume(&cut);
+        assert!(v > 0.97 * full && v < full, "{v} vs {full}");
+        // Nothing left to close.
+        assert_eq!(cut.close_holes(), 0);
+    }
 
     #[test]
     fn primitives_are_closed_and_outward() {

@@ -40,6 +40,9 @@ impl MeshSource {
             (None, Some(prim)) => build_primitive(prim),
             (None, None) => unreachable!("validate() requires a path or a primitive"),
         };
+        if params.close_holes {
+            rest.close_holes();
+        }
         if let Some(fit) = params.fit {
             let m = rest.fit_transform(fit.size, fit.center);
             rest.transform(m);

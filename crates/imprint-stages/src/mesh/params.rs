@@ -36,6 +36,10 @@ pub struct MeshParams {
         skip_serializing_if = "Option::is_none"
     )]
     pub fit: Option<Fit>,
+    /// Fill the mesh's holes (fans around each boundary loop's centroid), so that an open
+    /// scan such as the Stanford bunny has an inside: its distance field is then signed.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub close_holes: bool,
     /// Deformations applied in order to the fitted rest mesh, as functions of time.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub motion: Vec<Motion>,
@@ -50,6 +54,10 @@ fn yes() -> bool {
 
 fn is_true(b: &bool) -> bool {
     *b
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// Puts the rest mesh's bounding box, longest side `size`, centred on `center`.
