@@ -400,6 +400,7 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
     for w in run.warnings() {
         eprintln!("warning: {w}");
     }
+    let said = run.warnings().len();
     if let Some(c) = run.executor().report().resumed_at {
         eprintln!(
             "resuming at frame {c} from {}",
@@ -426,6 +427,10 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
         None,
     )?;
     bar.finish_and_clear();
+    // What the stages' self-checks counted while running (each kind once).
+    for w in report.warnings.iter().skip(said) {
+        eprintln!("warning: {w}");
+    }
     outln!("{}", report.table(&plan.order));
     outln!(
         "{} file(s) written; report: {}",

@@ -188,9 +188,17 @@ fn an_interpolated_field_is_the_exact_blend_of_the_builds_around_each_frame() {
         let w = (f - a) as f32 / 4.0;
         let (fa, fb) = (key(a), key(a + 4));
         let got = &interp.0[&("field".to_string(), f)];
+        // The ball is closed: its fields are signed, and the blend is of signed distances.
+        assert!(got.inside.is_some(), "frame {f}");
         for i in 0..got.dist.len() {
-            let want = fa.dist[i] + (fb.dist[i] - fa.dist[i]) * w;
-            assert_eq!(got.dist[i].to_bits(), want.to_bits(), "frame {f}, cell {i}");
+            let (sa, sb) = (fa.signed_distance(i), fb.signed_distance(i));
+            let want = sa + (sb - sa) * w;
+            assert_eq!(
+                got.dist[i].to_bits(),
+                want.abs().to_bits(),
+                "frame {f}, cell {i}"
+            );
+            assert_eq!(got.is_inside(i), Some(want < 0.0), "frame {f}, cell {i}");
         }
     }
     // Builds: keyframes 0 and 4 whole on frame 0; keyframe 8's two parts on frames 4 and 5
@@ -219,10 +227,9 @@ impl Observer for Cloth {
 /// frames (up to 7.5 mm behind the sphere) and the cloth follows the jumps.
 ///
 /// The sphere moves 10 mm between builds, no more than ε: a resting particle is then never
-/// inside the later build. Where it is (a body moving more than ε between builds), the
-/// unsigned field's vectors within a cell of that build's surface decide the side, and at
-/// cells near ε they can decide wrongly and push the cloth in (measured with 20 mm between
-/// builds on 21 mm cells: 2 cm deviations): interpolate only as far as the motion allows.
+/// inside the later build. Where it is (a body moving more than ε between builds), an
+/// unsigned field's vectors within a cell of that build's surface decide the side, and can
+/// decide wrongly and push the cloth in; a signed field does not (the next test).
 #[test]
 fn an_interpolated_collider_moves_the_cloth_as_the_every_frame_field_does() {
     let nodes = |sched: &str| {
@@ -267,4 +274,62 @@ fn an_interpolated_collider_moves_the_cloth_as_the_every_frame_field_does() {
     eprintln!("max deviation: interpolated {interpolated:.2e} m, jumping {jumping:.2e} m");
     assert!(interpolated < 0.1 * 0.01, "{interpolated}");
     assert!(jumping > 3.0 * interpolated, "{jumping} vs {interpolated}");
+}
+
+/// The limit above, lifted by the sign: the sphere moves 20 mm between builds (twice ε) on
+/// 21 mm cells. A resting particle ends up inside the later build; the signed field knows it
+/// is inside and takes it out the nearest way, so the cloth keeps to the every-frame run, where
+/// the unsigned field (`signed: false`) misreads the side near the surface and the cloth
+/// strays by centimetres.
+#[test]
+fn with_the_sign_interpolating_past_epsilon_keeps_the_cloth_out() {
+    let nodes = |signed: bool, sched: &str| {
+        format!(
+            r#"
+    "ball": Mesh(primitive: Sphere(radius: 0.3, segments: 32, rings: 16),
+                 motion: [Rigid(keys: [(time: 0), (time: 1, translate: (0, 0.12, 0))])]),
+    "vox": Voxelize(mesh: "ball", grid: Fit(resolution: 40), signed: {signed}),
+    "field": DistanceField(boundary: "vox", band: 4, measure: Never{sched}),
+    "cloth": Cloth(colliders: ["field"], params: (
+        shape: Grid(size: (0.8, 0.8), resolution: (12, 12), center: (0, 0.32, 0)),
+        material: Harada(k_structural: 20.0, k_shear: 5.0),
+        pins: [Indices([0, 11, 132, 143])],
+        damping: 0.97,
+        collision: (epsilon: 0.01, friction: 0.3),
+        substeps: 16)),
+    "m": WriteMesh(mesh: "cloth", every: 100),"#
+        )
+    };
+    let deviation = |signed: bool| {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RunOptions {
+            out: dir.path().to_path_buf(),
+            ..Default::default()
+        };
+        let mut runs = Vec::new();
+        for s in ["", ", every: 4, split: 2, interpolate: true"] {
+            let mut c = Cloth::default();
+            run_observed(
+                &plan(24, &nodes(signed, s)),
+                &opts,
+                &mut |_, _| {},
+                Some(&mut c),
+            )
+            .unwrap();
+            runs.push(c);
+        }
+        let mut worst = 0.0f32;
+        for (a, b) in runs[0].0.iter().zip(&runs[1].0) {
+            for (p, q) in a.iter().zip(b) {
+                worst = worst.max((*p - *q).length());
+            }
+        }
+        worst
+    };
+    let (signed, unsigned) = (deviation(true), deviation(false));
+    eprintln!(
+        "max deviation from the every-frame run: signed {signed:.2e} m, unsigned {unsigned:.2e} m"
+    );
+    assert!(signed < 0.5 * 0.01, "{signed}");
+    assert!(unsigned > 3.0 * signed, "{unsigned} vs {signed}");
 }

@@ -198,15 +198,16 @@ impl Stage for VoxelizeStage {
         }
         let mesh = ctx.values.mesh(&self.input)?;
         let signed = self.signed && self.closed.is_closed(mesh);
+        // In the report, not on stderr: a field that no cloth reads needs no sign.
         if self.signed && ctx.first {
             ctx.metric("signed", signed);
             if !signed {
                 ctx.metric(
                     "unsigned_because",
                     format!(
-                        "mesh '{}' is open (some edge borders an odd number of triangles): \
-                         its distance field is unsigned, so the cloth guesses which side a \
-                         particle is on (close the mesh's holes to sign it)",
+                        "mesh '{}' is open (some edge borders an odd number of triangles): its \
+                         distance field is unsigned, so the cloth guesses which side a particle \
+                         is on; `close_holes: true` on the Mesh node fills its holes",
                         self.input.node()
                     ),
                 );

@@ -180,10 +180,12 @@ fn ahead(v: &VoxelizeNode, boundary: &str, ctx: &mut BuildCtx<'_>) -> crate::Res
     })?;
     let source = MeshSource::new(mesh, ctx.check.base_dir)?;
     let spec = v.grid_spec(boundary, ctx)?;
+    let mut voxelizer = Voxelizer::new(spec)?;
+    voxelizer.signed = v.signed;
     Ok(Some(Ahead {
         mesh: Box::new(source),
         variant: v.variant,
-        voxelizer: Voxelizer::new(spec)?,
+        voxelizer,
         fps: ctx.check.fps,
     }))
 }
