@@ -363,6 +363,17 @@ impl FrameCtx<'_> {
         }
     }
 
+    /// A failed self-check of this node on this frame: `message` says what is wrong, `hint`
+    /// what to change.
+    pub fn numerical(&self, message: impl Into<String>, hint: impl Into<String>) -> Error {
+        Error::Numerical {
+            node: self.name.to_string(),
+            frame: self.frame,
+            message: message.into(),
+            hint: hint.into(),
+        }
+    }
+
     /// Sets one of the node's metrics in the report.
     pub fn metric(&mut self, key: &str, value: impl Into<serde_json::Value>) {
         self.report.metrics.insert(key.into(), value.into());
@@ -389,6 +400,24 @@ impl FrameCtx<'_> {
             .and_then(|v| v.as_u64())
             .unwrap_or(0);
         self.metric(key, now + n);
+    }
+
+    /// A run warning of kind `key`, given once per node and run: the first time, `message()`
+    /// goes to the node's report (`warnings`, as `KEY: MESSAGE (first at frame F)`) and from
+    /// there to the run's [`crate::report::Report::warnings`]; later calls with the same key do
+    /// nothing (a checkpoint keeps what was given, so a resumed run does not repeat it).
+    /// Returns whether it warned. For what a self-check counts rather than stops on: count
+    /// it every frame ([`FrameCtx::count`]) and warn once.
+    pub fn warn_once(&mut self, key: &str, message: impl FnOnce() -> String) -> bool {
+        let prefix = format!("{key}: ");
+        if self.report.warnings.iter().any(|w| w.starts_with(&prefix)) {
+            return false;
+        }
+        let frame = self.frame;
+        self.report
+            .warnings
+            .push(format!("{prefix}{} (first at frame {frame})", message()));
+        true
     }
 }
 

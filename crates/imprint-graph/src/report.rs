@@ -24,6 +24,10 @@ pub struct NodeReport {
     pub transfers: Vec<FrameTransfers>,
     /// The stage's own figures (boundary points, band cells, error in cells, files written…).
     pub metrics: BTreeMap<String, serde_json::Value>,
+    /// What the node warned about while running, each kind once per run
+    /// ([`crate::node::FrameCtx::warn_once`]; also in the run's [`Report::warnings`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// Bytes a node moved between host and GPU on one frame.
@@ -69,7 +73,9 @@ pub struct Report {
     pub nodes: BTreeMap<String, NodeReport>,
     pub pruned: Vec<(String, String)>,
     pub files_written: usize,
-    /// What the user should know (also printed by the binary).
+    /// What the user should know: the plan's and the stages' construction warnings (printed
+    /// by the binary before the run), then what nodes warned about while running (each kind
+    /// once per node and run, `node 'NAME': …`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
     /// Why the run stopped early, when it did (the frames above are those done).

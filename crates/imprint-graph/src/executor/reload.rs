@@ -109,6 +109,12 @@ impl Executor {
         self.frames.end = self.frames.end.min(plan.file.frames);
         self.report.pruned = plan.pruned.clone();
         self.report.warnings = plan.warnings.clone();
+        // What kept nodes warned about while running stays said (they do not say it again).
+        for s in &self.slots {
+            let said = s.report.warnings.iter();
+            let named = said.map(|w| format!("node '{}': {w}", s.name));
+            self.report.warnings.extend(named);
+        }
         self.kept.clear();
         Ok(fresh_names(plan, &same))
     }

@@ -36,6 +36,7 @@ impl Executor {
                 inputs,
                 changed,
                 own,
+                warned: slot.report.warnings.len(),
                 outcome: None,
             });
         }
@@ -82,6 +83,13 @@ impl Executor {
     fn apply(&mut self, mut job: Job, frame: u32) -> crate::Result<()> {
         let (result, ms, moved) = job.outcome.take().expect("every job ran");
         let slot = &mut self.slots[job.slot];
+        // What the node warned about this frame (each kind once per run) goes to the run's
+        // warnings, also when the frame failed.
+        for w in &slot.report.warnings[job.warned.min(slot.report.warnings.len())..] {
+            self.report
+                .warnings
+                .push(format!("node '{}': {w}", slot.name));
+        }
         let step = match result.and_then(|step| finite(step, &slot.name, frame)) {
             Ok(step) => step,
             Err(e) => {
@@ -151,6 +159,8 @@ struct Job {
     changed: bool,
     /// Its value, lent for the run.
     own: Option<Value>,
+    /// How many run warnings its report held before the run (the new ones follow).
+    warned: usize,
     /// The run's result, its time (ms) and the bytes it moved.
     outcome: Option<(imprint_core::Result<Step>, f64, transfer::Transfers)>,
 }

@@ -1,5 +1,6 @@
 //! `Drape`: Tokoi's depth-buffer draping, a garment fitted out of a body every frame the
-//! body or garment changes.
+//! body or garment changes. The vertices it leaves inside the body are counted and warned
+//! about once (`check_inside`).
 
 use crate::node::{
     Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
@@ -109,9 +110,49 @@ impl Stage for DrapeStage {
         let mut m = serde_json::to_value(&r).expect("plain data");
         m["frame"] = ctx.frame.into();
         ctx.push_per_frame(m);
+        check_inside(&r, &self.params, ctx);
         Ok(Step::computed(Value::Mesh(Arc::new(fitted))))
     }
     fn on_gpu(&self) -> bool {
         self.gpu.is_some()
     }
+}
+
+/// The drape's self-check: garment vertices left inside the body (the exact inside test,
+/// `DrapeReport::inside_after`, found by the fit at no extra queries) are counted per frame
+/// (`inside_after` in `per_frame`, the run's sum in `inside_after`) and warned about once.
+///
+/// Never a hard error: leaving them is the method's documented outcome, not a failure. T's
+/// views cannot resolve a vertex that no view sees inside or whose shortest push tunnels
+/// through another part of the body (T's own chest), and the fit leaves it where it was and
+/// counts it (`unresolved`); the distance-field fallback leaves those deeper than its band. A
+/// pushed vertex is checked to leave the body by half a texel past where it lands, so it may
+/// end inside by less than that.
+fn check_inside(
+    r: &imprint_stages::drape::DrapeReport,
+    params: &DrapeParams,
+    ctx: &mut FrameCtx<'_>,
+) {
+    if r.inside_after == 0 {
+        return;
+    }
+    ctx.count("inside_after", r.inside_after as u64);
+    let (n, unresolved, short) = (r.inside_after, r.unresolved, r.inside_after - r.unresolved);
+    let texel = r.texel;
+    let fallback = match params.fallback {
+        imprint_stages::drape::Fallback::None => "fallback: DistanceField(resolution: 64, band: 8)",
+        imprint_stages::drape::Fallback::DistanceField { .. } => {
+            "a wider fallback band, or more views (e.g. (1, 0, 0))"
+        }
+    };
+    ctx.warn_once("garment inside the body", || {
+        format!(
+            "{n} of {} garment vertices are left inside the body ({unresolved} no view or \
+             fallback resolved, {short} pushed to within half a texel ({:.2e} m) short of the \
+             surface); counted per frame (inside_after in report.json). For fewer: {fallback}; \
+             a finer resolution; an offset of at least half a texel",
+            r.vertices,
+            0.5 * texel
+        )
+    });
 }

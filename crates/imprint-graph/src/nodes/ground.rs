@@ -1,5 +1,6 @@
 //! `Ground`: a deformable ground (Onoue & Nishita) that keeps the prints objects press into
-//! it, optionally taking in a layer that piles up on it (`accumulate`).
+//! it, optionally taking in a layer that piles up on it (`accumulate`). After every frame the
+//! heights are checked against what the frame could make of them ([`GroundBounds`]).
 
 use crate::node::{
     Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
@@ -10,6 +11,7 @@ use crate::value::{HeightsIn, MeshIn, Value, Values};
 use imprint_core::{Error, HeightField, Mesh};
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
+use imprint_stages::ground::GroundGrid;
 use imprint_stages::ground::gpu::GpuGround;
 use imprint_stages::ground::{GroundParams, GroundSim, Initial, Relaxation};
 use serde::{Deserialize, Serialize};
@@ -109,9 +111,11 @@ impl Node for GroundNode {
             }
             None => Path::Cpu,
         };
+        let bounds = GroundBounds::new(sim.heights_units());
         Ok(Box::new(GroundStage {
             objects: self.objects.iter().map(|o| ctx.mesh_in(o)).collect(),
             params: self.params.clone(),
+            bounds,
             sim: Box::new(sim),
             accumulate: self.accumulate.as_ref().map(|a| ctx.heights_in(a)),
             last: None,
@@ -141,6 +145,8 @@ struct GroundStage {
     accumulate: Option<HeightsIn>,
     last: Option<Arc<HeightField>>,
     path: Path,
+    /// What the heights may reach, checked after every frame.
+    bounds: GroundBounds,
 }
 
 impl Stage for GroundStage {
@@ -151,11 +157,13 @@ impl Stage for GroundStage {
             if let Some(before) = &self.last {
                 let rise = imprint_stages::ground::rise(now, before);
                 self.sim.add_heights(&rise).map_err(|e| ctx.at_node(e))?;
+                self.bounds.take_in(&rise, self.sim.grid().unit);
             }
             self.last = Some(now.clone());
         }
         let meshes = ctx.values.meshes(&self.objects)?;
         let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
+        self.bounds.see_objects(&refs);
         let stepped = match &mut self.path {
             // The contact view stays on the GPU, where the passes read it.
             Path::Gpu(gpu, r, g) => g.step_resident(gpu, r, &refs),
@@ -165,7 +173,30 @@ impl Stage for GroundStage {
             Path::Cpu => self.sim.step(&refs),
         };
         let m = stepped.map_err(|e| ctx.at_node(e))?;
-        ctx.push_per_frame(serde_json::to_value(m).expect("plain data"));
+        self.bounds.displaced += m.displaced_units;
+        let (units, grid) = match &self.path {
+            Path::Gpu(_, _, g) => (g.heights_units(), g.grid()),
+            _ => (self.sim.heights_units(), self.sim.grid()),
+        };
+        let above = self.bounds.check(units, grid, ctx)?;
+        let mut frame_metrics = serde_json::to_value(m).expect("plain data");
+        frame_metrics["above_bound_cells"] = above.into();
+        ctx.push_per_frame(frame_metrics);
+        if above > 0 {
+            ctx.count("frames_above_bound", 1);
+            let top = self.bounds.object_top(grid) as f64 * grid.unit;
+            ctx.warn_once("ground above its bound", || {
+                format!(
+                    "{above} cell(s) stand above the highest start height plus the layer taken \
+                     in plus the tallest object ({top:.4} m): ground pushed out of a print piles \
+                     against a body that holds it (the ground never spills over an object), or \
+                     stays as needles with relaxation: Labelled; within what was pushed out, so \
+                     counted per frame (above_bound_cells in report.json), not stopped. \
+                     relaxation: Settle spreads such a heap once the body leaves; a shallower \
+                     press or a shorter drag keeps it lower"
+                )
+            });
+        }
         let heights = match &self.path {
             Path::Gpu(_, _, g) => g.to_height_field(),
             _ => self.sim.to_height_field(),
@@ -178,20 +209,153 @@ impl Stage for GroundStage {
             Path::Gpu(_, _, g) => Some(g.to_sim(&self.params)?),
             _ => None,
         };
-        save_state(&(gpu_sim.as_ref().unwrap_or(&self.sim), &self.last))
+        let sim = gpu_sim.as_ref().unwrap_or(&self.sim);
+        save_state(&(sim, &self.last, &self.bounds))
     }
 
     fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
-        let (sim, last): (GroundSim, Option<Arc<HeightField>>) = load_state(bytes)?;
+        type Saved = (GroundSim, Option<Arc<HeightField>>, GroundBounds);
+        let (sim, last, bounds): Saved = load_state(bytes)?;
         if let Path::Gpu(gpu, _, g) = &mut self.path {
             **g = GpuGround::from_sim(gpu, &sim)?;
         }
         *self.sim = sim;
         self.last = last;
+        // The start height is the file's (its initial heights), not the checkpoint's.
+        self.bounds = GroundBounds {
+            start_top: self.bounds.start_top,
+            ..bounds
+        };
         Ok(())
     }
 
     fn on_gpu(&self) -> bool {
         !matches!(self.path, Path::Cpu)
+    }
+}
+
+/// What a ground's heights may reach, checked after every frame (in height units, from the
+/// heights the stage keeps: O(cells), as the height field it publishes).
+///
+/// - **Below the base plane** (height 0): an error. The fixed-point heights are clamped
+///   there by every pass, so a negative height is a broken state, never a model's answer.
+/// - **Above what the frames could raise** (an error): no pass raises a cell by more than
+///   the ground pushed out of a print that frame (`displaced_units`: it goes to the rim) and
+///   the layer it took in (the largest rise of `accumulate`), and the slump only moves
+///   ground downhill; so no cell stands above the highest start height plus all that, plus
+///   one unit for the rounding of a layer to whole units. Beyond it the state is broken (a
+///   damaged checkpoint, or a changed initial height image under `--resume`). With α = 0
+///   (the snow preset) nothing is pushed out, so this is the start height plus the layer.
+/// - **Above the tallest object** (counted and warned once): above the highest start height
+///   plus the layer plus the tallest object's vertical extent (its mesh bounds, the largest
+///   seen so far) but within the bound above. That is a known limit of the model, not a
+///   failure: the ground does not spill over a body, so a dragged body's heap leans on its
+///   held face and stands taller than it while the body is down (`tests/ground_settle.rs`),
+///   and `Relaxation::Labelled` leaves needles. Counted per frame (`above_bound_cells`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct GroundBounds {
+    /// The highest start height, units (from the file's initial heights at build).
+    pub start_top: i64,
+    /// Σ over frames of the largest rise taken in from `accumulate`, units.
+    pub added: f64,
+    /// Σ over frames of the ground pushed out to the rims, units.
+    pub displaced: i64,
+    /// The largest vertical extent of an object so far, m.
+    pub object: f32,
+}
+
+impl GroundBounds {
+    /// Bounds of a ground that starts with `heights` (units).
+    pub fn new(heights: &[i32]) -> Self {
+        GroundBounds {
+            start_top: heights.iter().copied().max().unwrap_or(0).max(0) as i64,
+            ..Default::default()
+        }
+    }
+
+    /// A layer's rise taken in (metres per cell), `unit` m per height unit.
+    pub fn take_in(&mut self, rise: &[f32], unit: f64) {
+        let top = rise.iter().copied().fold(0.0f32, f32::max);
+        self.added += top as f64 / unit;
+    }
+
+    /// The objects pressing this frame.
+    pub fn see_objects(&mut self, objects: &[&Mesh]) {
+        for m in objects {
+            let b = m.bounds();
+            if !b.is_empty() {
+                self.object = self.object.max(b.size().y);
+            }
+        }
+    }
+
+    /// Start height plus the layer taken in, units (one unit for the layer's rounding).
+    fn base_top(&self) -> i64 {
+        self.start_top + self.added.ceil() as i64 + 1
+    }
+
+    /// The highest the frames could raise a cell, units.
+    pub fn hard_top(&self) -> i64 {
+        self.base_top() + self.displaced.max(0)
+    }
+
+    /// The highest start height plus the layer plus the tallest object, units.
+    pub fn object_top(&self, grid: &GroundGrid) -> i64 {
+        self.base_top() + (self.object as f64 / grid.unit).ceil() as i64
+    }
+
+    /// Checks `heights` (units, x fastest, on `grid`): an [`Error::Numerical`] naming the
+    /// node, the frame and the first cell out of bounds, or the number of cells above the
+    /// tallest object (within what the frames could raise).
+    pub fn check(
+        &self,
+        heights: &[i32],
+        grid: &GroundGrid,
+        ctx: &FrameCtx<'_>,
+    ) -> imprint_core::Result<usize> {
+        let (lo, hi) = heights
+            .iter()
+            .fold((i32::MAX, i32::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
+        if heights.is_empty() {
+            return Ok(0);
+        }
+        let nx = grid.dims.x as usize;
+        let unit = grid.unit;
+        let cell = |pred: &dyn Fn(i32) -> bool| {
+            let j = heights.iter().position(|&h| pred(h)).unwrap_or(0);
+            (j % nx, j / nx, heights[j] as f64 * unit)
+        };
+        let restart = "start the run again from its first frame (without --resume: a damaged \
+                       checkpoint, or one taken with another initial height image, gives such \
+                       a state); if it happens from the start, it is a bug in the ground \
+                       stage: please report it with the pipeline";
+        if lo < 0 {
+            let (i, k, h) = cell(&|h| h < 0);
+            return Err(ctx.numerical(
+                format!("ground cell ({i}, {k}) is at {h} m, below the base plane (0 m)"),
+                restart,
+            ));
+        }
+        let hard = self.hard_top();
+        if hi as i64 > hard {
+            let (i, k, h) = cell(&|h| h as i64 > hard);
+            return Err(ctx.numerical(
+                format!(
+                    "ground cell ({i}, {k}) is at {h} m, above anything the frames could raise \
+                     ({} m: the highest start height {} m, plus {} m taken in from the layer, \
+                     plus {} m pushed out of prints so far)",
+                    hard as f64 * unit,
+                    self.start_top as f64 * unit,
+                    self.added.ceil() * unit,
+                    self.displaced as f64 * unit
+                ),
+                restart,
+            ));
+        }
+        let top = self.object_top(grid);
+        if hi as i64 <= top {
+            return Ok(0);
+        }
+        Ok(heights.iter().filter(|&&h| h as i64 > top).count())
     }
 }

@@ -6,6 +6,10 @@
 //!
 //! **Measures** (`report.json`, per frame): the posed mesh's volume over the rest volume, and
 //! each joint's section over the same at rest (`imprint_stages::skin::measure::joint_measures`).
+//!
+//! **Self-check** (particles): no particle beyond its reach from its bone's target
+//! (`imprint_stages::skin::check`), a hard error: tested after every substep, and before the
+//! first frame after a checkpoint against the pose it was saved with.
 
 use crate::node::{
     Backend, BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Track, Trigger,
@@ -187,6 +191,9 @@ struct SkinStage {
     rest_measures: Option<(f64, Vec<f64>)>,
     /// The GPU the node runs on, when it does.
     gpu: Option<&'static GpuContext>,
+    /// Particles taken from a checkpoint, not yet checked against the pose they were saved
+    /// with (see [`SkinStage::frame`]).
+    check_loaded: bool,
 }
 
 enum State {
@@ -224,6 +231,7 @@ impl SkinStage {
             last_skin: None,
             rest_measures: None,
             gpu,
+            check_loaded: false,
         })
     }
 
@@ -263,6 +271,7 @@ impl SkinStage {
         }
         if let (Some(State::Particles(sim, gpu)), Some(p)) = (&mut self.state, particles) {
             **sim = p;
+            self.check_loaded = true;
             if let (Some(g), Some(ctx)) = (gpu, self.gpu) {
                 **g = GpuParticleSkin::new(ctx, sim)?;
             }
@@ -330,6 +339,16 @@ impl SkinStage {
                 m
             }
             State::Particles(sim, gpu) => {
+                // The self-check: no particle beyond its reach. The substeps test it after
+                // each substep (a blow-up: raise substeps); particles a checkpoint gave are
+                // tested first against the pose they were saved with, so that a state the
+                // simulation did not make is named as such (a hard error, like the blow-up:
+                // no approximation of the model puts a particle there).
+                if std::mem::take(&mut self.check_loaded)
+                    && let Some(saved) = &self.last_skin
+                {
+                    sim.check_reach(saved)?;
+                }
                 let ctx = self.gpu;
                 // One frame on whichever path the node runs on; the CPU reports its metrics.
                 let mut step = |start: &[Affine3A],

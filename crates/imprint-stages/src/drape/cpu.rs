@@ -26,6 +26,11 @@ pub struct DrapeReport {
     pub resolved_by_fallback: usize,
     /// Inside vertices left unresolved after the fallback (left where they were).
     pub unresolved: usize,
+    /// Vertices inside the body after the call (the exact inside test): the unresolved ones,
+    /// and pushed ones that ended short of the surface (a push is checked to leave the body
+    /// by half a texel past the pushed point, so it may end inside by less than that). What
+    /// the node counts and warns about; never an error (see the node).
+    pub inside_after: usize,
     /// Longest push applied, m.
     pub max_push: f32,
     /// The largest depth-map texel of the views, m (the resolution of the fit).
@@ -186,11 +191,14 @@ pub fn drape_with(
         .collect();
 
     let mut unresolved: Vec<usize> = Vec::new();
+    // Vertices pushed out: the only ones whose inside test may have changed.
+    let mut pushed: Vec<usize> = Vec::new();
     for (i, o) in outcome.iter().enumerate() {
         match o {
             None => {}
             Some(Ok(q)) => {
                 report.inside += 1;
+                pushed.push(i);
                 apply(&mut report, &mut garment[i], *q);
             }
             Some(Err(())) => {
@@ -220,11 +228,21 @@ pub fn drape_with(
         for (&i, q) in unresolved.iter().zip(fixed) {
             if let Some(q) = q {
                 report.resolved_by_fallback += 1;
+                pushed.push(i);
                 apply(&mut report, &mut garment[i], q);
             }
         }
     }
     report.unresolved = report.unresolved_by_views - report.resolved_by_fallback;
+    // The self-check: inside after the call. Outside vertices did not move and unresolved
+    // ones stayed inside, so only the pushed ones are tested again (each was tested along
+    // its push already: no more than the fit's own queries).
+    let short = pushed
+        .par_iter()
+        .with_min_len(256)
+        .filter(|&&i| test.inside(garment[i]))
+        .count();
+    report.inside_after = report.unresolved + short;
     Ok(report)
 }
 

@@ -11,8 +11,10 @@
 //! - [`gpu_particles`]: the same substeps and vertices on the GPU, tested against
 //!   [`particles`].
 //! - [`measure`]: volume, joint cross-section and self-intersection of a skinned mesh.
+//! - [`check`]: no particle beyond its reach (the self-check; the substeps test it too).
 
 pub mod blend;
+pub mod check;
 pub mod fill;
 pub mod gpu;
 pub mod gpu_particles;

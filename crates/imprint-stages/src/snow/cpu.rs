@@ -25,6 +25,7 @@
 //! the output is bare ground + snow.
 
 use super::arrival::{Arrival, Receivers, arrival_with, fall_directions, gather, vertex_normals};
+use super::check::Fallen;
 use super::params::SnowParams;
 use super::relax::{self, MAX_CELL_UNITS, QUANTUM, RelaxReport, Scratch};
 use glam::{UVec2, Vec3};
@@ -79,8 +80,17 @@ impl GroundSnow {
 
     /// Snow volume, m³ (whole quanta and remainders), summed in f64.
     pub fn volume(&self) -> f64 {
-        let q = self.total_units() as f64 + self.residual.iter().map(|&r| r as f64).sum::<f64>();
-        q * QUANTUM as f64 * self.base.cell as f64 * self.base.cell as f64
+        self.quanta_volume(self.total_quanta())
+    }
+
+    /// The snow on the field in quanta: whole quanta and remainders, summed in f64.
+    pub fn total_quanta(&self) -> f64 {
+        self.total_units() as f64 + self.residual.iter().map(|&r| r as f64).sum::<f64>()
+    }
+
+    /// `quanta` of snow over one cell each, m³.
+    pub fn quanta_volume(&self, quanta: f64) -> f64 {
+        quanta * QUANTUM as f64 * self.base.cell as f64 * self.base.cell as f64
     }
 }
 
@@ -140,6 +150,8 @@ pub struct SnowSim {
     #[serde(skip)]
     scratch: Scratch,
     time: f64,
+    /// What has fallen so far, for [`SnowSim::check`].
+    fallen: Fallen,
 }
 
 impl SnowSim {
@@ -154,6 +166,7 @@ impl SnowSim {
             arrival: None,
             scratch: Scratch::default(),
             time: 0.0,
+            fallen: Fallen::default(),
         })
     }
 
@@ -169,6 +182,16 @@ impl SnowSim {
     /// Seconds of snowfall so far.
     pub fn time(&self) -> f64 {
         self.time
+    }
+
+    /// What has fallen so far: the bound of [`SnowSim::check`].
+    pub fn fallen(&self) -> Fallen {
+        self.fallen
+    }
+
+    /// The meshes snow is kept on (0 before the first step).
+    pub fn mesh_count(&self) -> usize {
+        self.meshes.len()
     }
 
     /// Snow depth per vertex of mesh `m` (empty before its first step).
@@ -302,6 +325,7 @@ impl SnowSim {
                 });
         }
         if let Some(g) = &mut self.ground {
+            let before = g.total_quanta();
             let start = receivers.ground().start;
             let normals = &receivers.normals[start..];
             let overflow = g
@@ -333,7 +357,11 @@ impl SnowSim {
                     self.params.rate
                 )));
             }
+            self.fallen.ground_quanta += g.total_quanta() - before;
         }
+        // As the deposit sums a vertex's depth: in f32, the largest gain a step can give.
+        self.fallen.depth += gain;
+        self.fallen.steps += 1;
         let reached = arrival.counts.iter().filter(|&&c| c > 0).count();
         let directions = arrival.directions;
         self.arrival = Some(arrival);
@@ -372,7 +400,7 @@ impl SnowSim {
     }
 
     /// Pours `volume` m³ of snow onto ground cell `cell` (rounded to whole quanta); returns
-    /// the quanta added. Needs a ground ([`Self::set_ground`] or a step).
+    /// the quanta added (counted as fallen). Needs a ground ([`Self::set_ground`] or a step).
     pub fn pour(&mut self, cell: UVec2, volume: f64) -> Result<u32> {
         let g = self
             .ground
@@ -396,6 +424,8 @@ impl SnowSim {
             )));
         }
         g.units[c] = total as u32;
+        // Snow put there counts as fallen for [`SnowSim::check`].
+        self.fallen.ground_quanta += q;
         Ok(q as u32)
     }
 

@@ -35,7 +35,7 @@
 //! Read in this order: [`params`] (what a pipeline file says), [`arrival`] (depth maps and
 //! probabilities), [`cpu`] (deposit and outputs, [`SnowSim`]), [`relax`] (stabilisation),
 //! [`gpu`] (the stabilisation on the GPU, bit-identical to [`relax`], and the arrival
-//! look-ups).
+//! look-ups), [`check`] (after each step: no more snow than fell).
 //!
 //! ```
 //! use imprint_stages::snow::{SnowParams, SnowSim};
@@ -58,12 +58,14 @@
 //! ```
 
 pub mod arrival;
+pub mod check;
 pub mod cpu;
 pub mod gpu;
 pub mod params;
 pub mod relax;
 
 pub use arrival::{Arrival, Receivers, fall_directions};
+pub use check::{Fallen, SnowCheck};
 pub use cpu::{GroundCover, GroundSnow, MeshSnow, SnowCover, SnowSim, SnowStep};
 pub use params::SnowParams;
 pub use relax::{QUANTUM, RelaxReport};
