@@ -454,12 +454,14 @@ impl SkinStage {
                 }
             }
             SkinMethod::Particles(p) => {
-                let sim = ParticleSkin::new(rest, &segments, p)
+                let mut sim = ParticleSkin::new(rest, &segments, p)
                     .map_err(|e| match e {
                         Error::Invalid(m) => Error::Invalid(format!("node '{}': {m}", self.name)),
                         e => e,
                     })?
                     .with_name(&self.name);
+                // The run's history starts at the rig's first pose, not necessarily its rest.
+                sim.place(&segments, &self.rig.pose(0.0).skin)?;
                 let gpu = match self.gpu {
                     Some(ctx) => Some(Box::new(GpuParticleSkin::new(ctx, &sim)?)),
                     None => None,

@@ -470,6 +470,43 @@ impl ParticleSkin {
         })
     }
 
+    /// Puts the particles where the bones' skinning transforms `pose` carry them, at rest:
+    /// the start of a run whose first pose is not the rest pose (particles left at rest would
+    /// start up to a limb's length from their targets and stop the run as a blow-up on its
+    /// first frame). Placed by dual-quaternion skinning with automatic weights over the bones
+    /// `segments` (rest), smooth across the joints, where each particle's own bone alone
+    /// would tear the joint open and load its springs far past their stable strain.
+    pub fn place(&mut self, segments: &[(Vec3, Vec3)], pose: &[Affine3A]) -> Result<()> {
+        if pose.len() != self.bones
+            || segments.len() != self.bones
+            || pose.iter().any(|m| !m.is_finite())
+        {
+            return Err(Error::Invalid(format!(
+                "particle skinning: {} bones, but {} segments and a pose of {} finite transforms",
+                self.bones,
+                segments.len(),
+                pose.iter().filter(|m| m.is_finite()).count()
+            )));
+        }
+        let rot: Vec<Quat> = pose
+            .iter()
+            .map(|m| m.to_scale_rotation_translation().1.normalize())
+            .collect();
+        let weights = super::weights::automatic(&self.rest, segments, &Default::default());
+        let placed = super::blend::dqs(&self.rest, &weights, pose);
+        for (i, &x) in placed.iter().enumerate() {
+            let b = self.bone[i] as usize;
+            (self.xa[i], self.x[i]) = (x.into(), x);
+            self.target[i] = pose[b].transform_point3a(self.rest[i].into());
+            self.rot[i] = rot[b];
+            self.half_rot[i] = Mat3A::from_quat(rot[b]) * 0.5;
+        }
+        self.v.fill(Vec3A::ZERO);
+        self.ve.fill(Vec3A::ZERO);
+        self.bone_rot = rot;
+        Ok(())
+    }
+
     /// The node name used in errors.
     pub fn with_name(mut self, node: &str) -> Self {
         self.node = node.to_string();
@@ -706,7 +743,9 @@ impl ParticleSkin {
                     ),
                     hint: format!(
                         "raise substeps (now {substeps}) or lower stiffness / damping / \
-                         bone_stiffness; the time step is past the stable limit"
+                         bone_stiffness if the time step is past the stable limit; if more \
+                         substeps fail at the same frame, the bones move faster than the \
+                         particles follow them: slow the pose or raise bone_stiffness"
                     ),
                 });
             }
