@@ -271,3 +271,4 @@ pub mod drape {
 }
 
 pub mod skin;
+pub mod stress;

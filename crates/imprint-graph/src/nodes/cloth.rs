@@ -198,6 +198,9 @@ type BodyFields = (Option<Arc<DistanceField>>, Arc<DistanceField>, (f32, f32));
 
 impl Stage for ClothStage {
     fn run(&mut self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<Step> {
+        if ctx.first {
+            self.warn_coarse_fields(ctx)?;
+        }
         let m = match &mut self.gpu {
             Some(g) => step_gpu(g, &mut self.sim, &self.colliders, ctx)?,
             None => self.step_cpu(ctx)?,
@@ -273,6 +276,36 @@ impl Stage for ClothStage {
 }
 
 impl ClothStage {
+    /// A field is exact to about a cell: where its cells are wider than ε, a part of the body
+    /// thinner than a cell (a horn, a leg) can hold a particle inside while the field reads
+    /// it outside. Said once, with the resolution that would resolve ε.
+    fn warn_coarse_fields(&self, ctx: &mut FrameCtx<'_>) -> imprint_core::Result<()> {
+        let eps = self.sim.params().collision.epsilon;
+        for c in &self.colliders {
+            let spec = match &ctx.values.field(c)?.data {
+                FieldData::Cpu(f) => f.spec,
+                FieldData::Gpu(g) => g.spec,
+                FieldData::Blend { b, .. } => b.spec,
+            };
+            if spec.cell > eps {
+                let longest = spec.dims.max_element() as f32;
+                let needed = (longest * spec.cell / eps).ceil() as u32;
+                let field = c.node().to_string();
+                ctx.warn_once(&format!("coarse field '{field}'"), || {
+                    format!(
+                        "field '{field}' has cells of {:.1} mm, wider than ε = {:.1} mm: a part \
+                         of the body thinner than a cell can hold cloth particles inside; a \
+                         grid of about {needed} cells along its longest side (or ε ≥ the cell) \
+                         keeps them out",
+                        spec.cell * 1e3,
+                        eps * 1e3
+                    )
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// One frame on the CPU: per collider, the two fields the frame blends between and its
     /// span of the blend (last frame's and this frame's field, or an interpolated node's two
     /// builds around the frame); then the depth-map bodies.
