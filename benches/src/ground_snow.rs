@@ -101,8 +101,8 @@ pub fn section(_root: &Path, repeat: usize) -> String {
          median of {runs} runs. Goal (issue): sphere ≤ 1 ms, box ≤ 3 ms, with the default. What \
          the box left (first run): the worst slope between neighbours not in contact, over all \
          frames, divided by tan θ (1.00: at rest, T plus at most one unit), and the tallest cell \
-         (start plus box: 0.4 m; the heap leaning on the box's front face may pass it while the \
-         box holds it up).\n"
+         over all frames (start plus box: 0.4 m, the issue's bound; Settle keeps the heap the box \
+         pushes at most at the box's top, 0.3 m, spilling the rest over it).\n"
     );
     let _ = writeln!(
         s,

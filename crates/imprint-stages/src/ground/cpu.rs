@@ -46,6 +46,9 @@ pub struct GroundSim {
     /// [`GroundSim::add_heights`]: the fraction of a unit each cell is owed (allocated on
     /// first use).
     residual: Vec<f64>,
+    /// `Settle`: the work list's buffers, kept from frame to frame (not state).
+    #[serde(skip)]
+    scratch: super::settle::Scratch,
 }
 
 impl GroundSim {
@@ -128,6 +131,7 @@ impl GroundSim {
             held,
             pending: Vec::new(),
             residual: Vec::new(),
+            scratch: Default::default(),
         })
     }
 
@@ -164,7 +168,11 @@ impl GroundSim {
         }
         let relaxed = match self.relaxation {
             Relaxation::Full => self.relax_full(&mut m),
-            Relaxation::Settle => self.settle(&mut m),
+            Relaxation::Settle => {
+                let tops = super::settle::Tops::of(objects, &self.grid);
+                let before = start.as_deref().expect("kept in Settle mode");
+                self.settle(before, &tops, &mut m)
+            }
             Relaxation::Labelled => Ok(()),
         };
         if let Err(e) = relaxed {
@@ -177,7 +185,9 @@ impl GroundSim {
         }
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
-        m.max_slope = self.max_slope();
+        if self.relaxation != Relaxation::Settle {
+            m.max_slope = self.max_slope();
+        }
         self.hold_contact(false);
         self.frame += 1;
         Ok(m)
@@ -238,6 +248,15 @@ impl GroundSim {
     /// The heights in units, x fastest.
     pub fn heights_units(&self) -> &[i32] {
         &self.heights
+    }
+
+    /// The first cell (x fastest) whose height is below `lowest` or above `highest` (metres,
+    /// each rounded to the nearest height unit), with its height in metres; `None` when
+    /// every cell is within. For a frame's self-check: `lowest` the base plane (0) and
+    /// `highest` the highest start height plus the tallest body's height, which `Settle`
+    /// keeps (material above a body spills over it; see the `settle` module).
+    pub fn height_bounds_violation(&self, lowest: f32, highest: f32) -> Option<(usize, f32)> {
+        height_bounds_violation(&self.heights, &self.grid, lowest, highest)
     }
 
     /// The cells, their place in the world and the height unit.
@@ -487,22 +506,32 @@ impl GroundSim {
         }
     }
 
-    /// `Settle`: the work list from the cells the last frame released and this frame's work
-    /// window, to rest (see [`super::settle`]).
-    fn settle(&mut self, m: &mut GroundFrameMetrics) -> Result<()> {
+    /// `Settle`: the work list from the cells the last frame released and the cells this
+    /// frame's press changed (from `before`, the heights at the frame's start), to rest,
+    /// material above the bodies' `tops` spilling over them (see [`super::settle`]).
+    fn settle(
+        &mut self,
+        before: &[i32],
+        tops: &super::settle::Tops,
+        m: &mut GroundFrameMetrics,
+    ) -> Result<()> {
         if self.threshold >= NO_SLUMP {
             return Ok(());
         }
-        let window = self.maps.as_ref().map(|maps| maps.window);
+        let changed = self.maps.as_ref().map_or_else(Vec::new, |maps| {
+            super::settle::changed_cells(before, &self.heights, maps.window, self.grid.dims.x)
+        });
         super::settle::settle_frame(
             &mut self.heights,
             &self.held,
-            self.grid.dims,
+            &self.grid,
             self.threshold,
+            tops,
             &self.pending,
-            window,
+            &changed,
             self.max_relax_iterations,
             self.frame,
+            &mut self.scratch,
             m,
         )
     }
@@ -593,7 +622,7 @@ impl GroundSim {
         let diff = |a: usize, b: usize| (h[a] as i64 - h[b] as i64).unsigned_abs();
         let max = match self.relaxation {
             Relaxation::Full | Relaxation::Settle => {
-                super::settle::max_free_difference(h, &self.held, self.grid.dims)
+                max_free_difference(h, &self.held, self.grid.dims)
             }
             Relaxation::Labelled => {
                 let Some(maps) = &self.maps else {
@@ -661,6 +690,47 @@ pub(crate) fn work_window(
         })
         .collect();
     Some((win, bottom))
+}
+
+/// [`GroundSim::height_bounds_violation`] over `heights` (units, x fastest).
+pub(crate) fn height_bounds_violation(
+    heights: &[i32],
+    grid: &GroundGrid,
+    lowest: f32,
+    highest: f32,
+) -> Option<(usize, f32)> {
+    let (lo, hi) = (grid.to_units(lowest as f64), grid.to_units(highest as f64));
+    let j = heights
+        .iter()
+        .position(|&h| (h as i64) < lo || h as i64 > hi)?;
+    Some((j, grid.to_metres(heights[j] as i64) as f32))
+}
+
+/// The largest difference, units, between two 4-neighbours neither of which is held.
+fn max_free_difference(heights: &[i32], held: &[bool], dims: UVec2) -> u64 {
+    let nx = dims.x as usize;
+    let free = |j: usize| !held[j];
+    let diff = |a: usize, b: usize| (heights[a] as i64 - heights[b] as i64).unsigned_abs();
+    (0..dims.y as usize)
+        .into_par_iter()
+        .map(|k| {
+            let mut d = 0;
+            for i in 0..nx {
+                let j = k * nx + i;
+                if !free(j) {
+                    continue;
+                }
+                if i + 1 < nx && free(j + 1) {
+                    d = d.max(diff(j, j + 1));
+                }
+                if j + nx < heights.len() && free(j + nx) {
+                    d = d.max(diff(j, j + nx));
+                }
+            }
+            d
+        })
+        .max()
+        .unwrap_or(0)
 }
 
 /// What a relaxation pass moved, and the box of the cells it changed.

@@ -37,7 +37,7 @@
 //! CPU: the heights are read back anyway (step 6), the frame's contact cells come back with
 //! them (one `u32` per window cell), `ground::settle::settle_frame` runs on them exactly as
 //! in [`GroundSim`], and the heights are uploaded again when it moved anything; `max_slope`
-//! is then taken on the CPU as [`GroundSim`] takes it. Same integers and metrics as the CPU.
+//! comes from the settle, as in [`GroundSim`]. Same integers and metrics as the CPU.
 //!
 //! Not ported: `Relaxation::Full` ([`GpuGround::new`] refuses it; use [`GroundSim`]), and
 //! [`GroundSim::add_heights`] (move the ground to the CPU and back with
@@ -109,6 +109,8 @@ pub struct GpuGround {
     max_relax_iterations: u32,
     /// `Settle`: the cells the next frame's work list starts from (as in [`GroundSim`]).
     pending: Vec<u32>,
+    /// `Settle`: the work list's buffers.
+    scratch: super::settle::Scratch,
     frame: u32,
     heights: wgpu::Buffer,
     /// The heights as of the last frame's end, for the next frame's contact.
@@ -156,6 +158,7 @@ impl GpuGround {
             settle: sim.relaxation() == Relaxation::Settle,
             max_relax_iterations: sim.max_relax_iterations(),
             pending: sim.pending().to_vec(),
+            scratch: Default::default(),
             frame: sim.frame(),
             heights: ctx.storage_buffer("ground heights", sim.heights_units())?,
             mirror: sim.heights_units().to_vec(),
@@ -197,6 +200,11 @@ impl GpuGround {
         self.frame
     }
 
+    /// As [`GroundSim::height_bounds_violation`], on the heights as of the last frame's end.
+    pub fn height_bounds_violation(&self, lowest: f32, highest: f32) -> Option<(usize, f32)> {
+        super::cpu::height_bounds_violation(&self.mirror, &self.grid, lowest, highest)
+    }
+
     /// Σ heights, units.
     pub fn mass(&self) -> i64 {
         self.mirror.iter().map(|&h| h as i64).sum()
@@ -231,7 +239,7 @@ impl GpuGround {
         {
             pressed = self.press(ctx, &b, &mut m)?;
         }
-        self.settle_after(ctx, pressed, &mut m)?;
+        self.settle_after(ctx, objects, pressed, &mut m)?;
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
         self.frame += 1;
@@ -258,7 +266,7 @@ impl GpuGround {
             ..Default::default()
         };
         let pressed = self.contact_resident(ctx, raster, objects, &mut m)?;
-        self.settle_after(ctx, pressed, &mut m)?;
+        self.settle_after(ctx, objects, pressed, &mut m)?;
         m.mass_units = self.mass();
         m.mass_volume = m.mass_units as f64 * self.grid.unit_volume();
         self.frame += 1;
@@ -640,8 +648,9 @@ impl GpuGround {
         )?;
         submit(ctx, enc, None);
         let stats: Vec<u32> = ctx.read_buffer(&f.stats)?;
-        self.mirror = ctx.read_buffer(&self.heights)?;
-        self.mirror.truncate(self.grid.len());
+        let mut read: Vec<i32> = ctx.read_buffer(&self.heights)?;
+        read.truncate(self.grid.len());
+        let before = std::mem::replace(&mut self.mirror, read);
 
         let unit_volume = self.grid.unit_volume();
         m.removed_volume = m.removed_units as f64 * unit_volume;
@@ -657,6 +666,11 @@ impl GpuGround {
             }
         }
         m.max_slope = stats[STAT_MAX_DIFF] as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
+        let changed = if self.settle {
+            super::settle::changed_cells(&before, &self.mirror, win, nx)
+        } else {
+            Vec::new()
+        };
         let contact = if self.settle {
             let c: Vec<u32> = ctx.read_buffer(&f.contact)?;
             let w = win.w as usize;
@@ -667,10 +681,7 @@ impl GpuGround {
         } else {
             Vec::new()
         };
-        Ok(Some(Pressed {
-            window: win,
-            contact,
-        }))
+        Ok(Some(Pressed { changed, contact }))
     }
 
     /// `Settle`: the CPU's settle on the heights read back (see the module doc), then the
@@ -679,31 +690,37 @@ impl GpuGround {
     fn settle_after(
         &mut self,
         ctx: &GpuContext,
+        objects: &[&Mesh],
         pressed: Option<Pressed>,
         m: &mut GroundFrameMetrics,
     ) -> Result<()> {
         if !self.settle {
             return Ok(());
         }
-        let (window, contact) = match pressed {
-            Some(p) => (Some(p.window), p.contact),
-            None => (None, Vec::new()),
+        let (changed, contact) = match pressed {
+            Some(p) => (p.changed, p.contact),
+            None => (Vec::new(), Vec::new()),
         };
         let mut held = vec![false; self.grid.len()];
         for &j in &contact {
             held[j as usize] = true;
         }
+        // As the CPU ground: the slope over the cells the settle took (none at θ = 90°).
+        m.max_slope = 0.0;
         if let Some(t) = self.threshold {
             let mut heights = self.mirror.clone();
+            let tops = super::settle::Tops::of(objects, &self.grid);
             super::settle::settle_frame(
                 &mut heights,
                 &held,
-                self.grid.dims,
+                &self.grid,
                 t,
+                &tops,
                 &self.pending,
-                window,
+                &changed,
                 self.max_relax_iterations,
                 self.frame,
+                &mut self.scratch,
                 m,
             )?;
             if m.slumped_units > 0 {
@@ -712,17 +729,15 @@ impl GpuGround {
                 self.mirror = heights;
             }
         }
-        let d = super::settle::max_free_difference(&self.mirror, &held, self.grid.dims);
-        m.max_slope = d as f32 * (self.grid.unit / self.grid.cell as f64) as f32;
         self.pending = contact;
         Ok(())
     }
 }
 
-/// What a frame's press on the GPU leaves for `Settle`: its work window and contact cells
-/// (ascending; empty unless settling).
+/// What a frame's press on the GPU leaves for `Settle` (ascending; empty unless settling):
+/// the cells it changed and its contact cells.
 struct Pressed {
-    window: Window,
+    changed: Vec<u32>,
     contact: Vec<u32>,
 }
 

@@ -34,7 +34,8 @@ pub struct GroundFrameMetrics {
     /// Material the slump moved, units.
     pub slumped_units: i64,
     /// Steepest rise over run between 4-neighbours after the frame, over the edges the slump
-    /// is responsible for: between labelled cells (`Labelled`), or between any two cells not
-    /// held under an object (`Full`). 0 when there are none.
+    /// is responsible for: between labelled cells (`Labelled`), between any two cells not
+    /// held under an object (`Full`), or between a cell the settle's work list took this
+    /// frame and a neighbour not held (`Settle`; none at θ = 90°). 0 when there are none.
     pub max_slope: f32,
 }

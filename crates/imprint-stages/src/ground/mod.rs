@@ -20,11 +20,15 @@
 //! 4. **Outer contour map** (O §2.4): around the contact, the distance from it, rim = 0,
 //!    for `slump_band` rings (O gives no width).
 //! 5. **Settle** (the default, `Relaxation::Settle`, `settle.rs`): a work list that starts
-//!    from every cell the frame changed (this frame's window, last frame's released contact,
-//!    cells a layer was added to) moves whole units from a cell to its steepest free lower
-//!    neighbour while the difference exceeds T + one unit, and queues what it touched, until
-//!    nothing is steeper anywhere the ground changed. Cost grows with the cells that move;
-//!    each move lowers Σh², so it ends. O's slump below visits only this frame's labelled
+//!    from every cell the frame changed (what the press changed, last frame's released
+//!    contact, cells a layer was added to) slides whole units from a cell down a path from
+//!    its steepest free lower neighbour, levelled in one move to a ramp of slope T, while a
+//!    difference exceeds T + one unit, and queues what it touched, until nothing is steeper
+//!    anywhere the ground changed. Material leaning on a body higher than the body's top
+//!    (the top of its bounds) spills over the body to its far side: a heightfield cannot
+//!    hold it on the body, so no cell rises above the start height plus the body's height.
+//!    Cost grows with the cells that move (a heap carried n cells is one path, not a
+//!    diffusion); each move lowers Σh², so it ends. O's slump below visits only this frame's labelled
 //!    cells En times, which cannot spread what a dragged body pushes ahead of it (a dragged
 //!    box left 35 cm steps between neighbours, `tests/ground_settle.rs`); it stays as
 //!    `Relaxation::Labelled`.

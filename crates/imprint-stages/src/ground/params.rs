@@ -157,10 +157,13 @@ pub enum Relaxation {
     /// (neither in contact this frame) differ by more than tan θ · cell plus one height unit,
     /// wherever the ground changed (this frame's window around the contact, the cells the
     /// last frame's contact released, what `add_heights` changed), not only this frame's
-    /// labelled cells. A FIFO work list from those cells moves whole units from a cell to its
-    /// steepest lower neighbour until nothing is too steep (`ground::settle`); its cost grows
-    /// with the cells that move, and `max_relax_iterations` bounds it. Ground that never
-    /// changed (e.g. a steep initial heightmap) is not touched.
+    /// labelled cells. A FIFO work list from those cells slides whole units from a cell down
+    /// a path of lower neighbours, levelled to a ramp of slope θ in one move, until nothing
+    /// is too steep (`ground::settle`); its cost grows with the cells that move, and
+    /// `max_relax_iterations` bounds it. Material pushed against a body higher than the
+    /// body's top spills over it to the far side, so no cell rises above the highest start
+    /// height plus the body's height while the body presses. Ground that never changed (e.g.
+    /// a steep initial heightmap) is not touched.
     #[default]
     Settle,
     /// O §2.5 as published: `slump_iterations` (En) passes over the labelled cells around

@@ -325,7 +325,8 @@ fn record_inside(
         shader!("voxel/solid.wgsl"),
     ];
     // Each entry binds what it uses (the layouts are derived from the shader).
-    let passes: [(&str, u32, Vec<(u32, &wgpu::Buffer)>); 3] = [
+    type Pass<'a> = (&'static str, u32, Vec<(u32, &'a wgpu::Buffer)>);
+    let passes: [Pass; 3] = [
         ("mark", n_tris, vec![(0, &p), (1, tris), (2, &marks)]),
         ("rows", params.n_rows, vec![(0, &p), (2, &marks)]),
         (

@@ -207,11 +207,9 @@ mod tests {
 
     #[test]
     fn the_cow_with_its_horns() {
-        for name in ["cow.obj"] {
-            let path = format!("{}/../../assets/meshes/{name}", env!("CARGO_MANIFEST_DIR"));
-            let mesh = Mesh::load_obj(std::path::Path::new(&path)).unwrap();
-            assert!(mesh.is_closed(), "{name} is open");
-            agrees_with_rays(&mesh, 48);
-        }
+        let path = format!("{}/../../assets/meshes/cow.obj", env!("CARGO_MANIFEST_DIR"));
+        let mesh = Mesh::load_obj(std::path::Path::new(&path)).unwrap();
+        assert!(mesh.is_closed(), "the cow is open");
+        agrees_with_rays(&mesh, 48);
     }
 }
