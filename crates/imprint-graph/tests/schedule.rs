@@ -220,6 +220,28 @@ impl Observer for Cloth {
     }
 }
 
+/// The largest distance between the cloth's particles in runs of `a` and `b`, any frame.
+fn cloth_deviation(a: &Plan, b: &Plan) -> f32 {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        out: dir.path().to_path_buf(),
+        ..Default::default()
+    };
+    let mut runs = Vec::new();
+    for p in [a, b] {
+        let mut c = Cloth::default();
+        run_observed(p, &opts, &mut |_, _| {}, Some(&mut c)).unwrap();
+        runs.push(c);
+    }
+    let mut worst = 0.0f32;
+    for (a, b) in runs[0].0.iter().zip(&runs[1].0) {
+        for (p, q) in a.iter().zip(b) {
+            worst = worst.max((*p - *q).length());
+        }
+    }
+    worst
+}
+
 /// A cloth pinned at its corners, pushed up by a sphere rising at 0.06 m/s (heavily damped,
 /// so its shape follows the sphere rather than its own history): with the field built every
 /// 4 frames and interpolated (split in 2) the cloth stays within a small fraction of ε of the
@@ -249,26 +271,7 @@ fn an_interpolated_collider_moves_the_cloth_as_the_every_frame_field_does() {
     "m": WriteMesh(mesh: "cloth", every: 100),"#
         )
     };
-    let deviation = |sched: &str| {
-        let dir = tempfile::tempdir().unwrap();
-        let opts = RunOptions {
-            out: dir.path().to_path_buf(),
-            ..Default::default()
-        };
-        let mut runs = Vec::new();
-        for s in ["", sched] {
-            let mut c = Cloth::default();
-            run_observed(&plan(24, &nodes(s)), &opts, &mut |_, _| {}, Some(&mut c)).unwrap();
-            runs.push(c);
-        }
-        let mut worst = 0.0f32;
-        for (a, b) in runs[0].0.iter().zip(&runs[1].0) {
-            for (p, q) in a.iter().zip(b) {
-                worst = worst.max((*p - *q).length());
-            }
-        }
-        worst
-    };
+    let deviation = |sched: &str| cloth_deviation(&plan(24, &nodes("")), &plan(24, &nodes(sched)));
     let interpolated = deviation(", every: 4, split: 2, interpolate: true");
     let jumping = deviation(", every: 4");
     eprintln!("max deviation: interpolated {interpolated:.2e} m, jumping {jumping:.2e} m");
@@ -300,31 +303,12 @@ fn with_the_sign_interpolating_past_epsilon_keeps_the_cloth_out() {
     "m": WriteMesh(mesh: "cloth", every: 100),"#
         )
     };
+    let interpolated = ", every: 4, split: 2, interpolate: true";
     let deviation = |signed: bool| {
-        let dir = tempfile::tempdir().unwrap();
-        let opts = RunOptions {
-            out: dir.path().to_path_buf(),
-            ..Default::default()
-        };
-        let mut runs = Vec::new();
-        for s in ["", ", every: 4, split: 2, interpolate: true"] {
-            let mut c = Cloth::default();
-            run_observed(
-                &plan(24, &nodes(signed, s)),
-                &opts,
-                &mut |_, _| {},
-                Some(&mut c),
-            )
-            .unwrap();
-            runs.push(c);
-        }
-        let mut worst = 0.0f32;
-        for (a, b) in runs[0].0.iter().zip(&runs[1].0) {
-            for (p, q) in a.iter().zip(b) {
-                worst = worst.max((*p - *q).length());
-            }
-        }
-        worst
+        cloth_deviation(
+            &plan(24, &nodes(signed, "")),
+            &plan(24, &nodes(signed, interpolated)),
+        )
     };
     let (signed, unsigned) = (deviation(true), deviation(false));
     eprintln!(

@@ -483,60 +483,7 @@ impl Builder {
         ));
         let motion = motions(rng, self.duration(), size, &mut self.parts);
         self.add("body", body.node(size, center, &motion));
-        let by_field = rng.chance(0.7);
-        // A field's cell (about): its contact is exact to about a cell, so ε is drawn no
-        // smaller (the Cloth node warns below it). Depth maps keep the ε drawn: the check
-        // allows them a texel (see `check`).
-        let mut resolved = 0.0f32;
-        let collider = if by_field {
-            let (res, pad, band) = (rng.int(24, 56), rng.range(0.1, 0.2), rng.range(2.0, 4.0));
-            // Fit: the swept box's longest side (the body's, grown by its motion) with padding.
-            resolved = 1.3 * fitted.max_element() * (1.0 + 2.0 * pad) / res as f32;
-            self.add(
-                "vox",
-                format!(
-                    "Voxelize(mesh: \"body\", grid: Fit(resolution: {res}, padding: {}))",
-                    f(pad)
-                ),
-            );
-            self.add(
-                "field",
-                format!(
-                    "DistanceField(boundary: \"vox\", band: {}, measure: Never)",
-                    f(band)
-                ),
-            );
-            self.parts.push(format!(
-                "  collider: distance field {res}³, band {}",
-                f(band)
-            ));
-            "colliders: [\"field\"]".to_string()
-        } else {
-            // T's three axes (top, front, side: fewer leave a body's sides unseen, a known
-            // limit of the method), in a random order, and up to two more directions.
-            let mut views: Vec<String> = ["(0, -1, 0)", "(0, 0, -1)", "(1, 0, 0)"]
-                .map(String::from)
-                .to_vec();
-            for i in (1..views.len()).rev() {
-                views.swap(i, rng.int(0, i as u32) as usize);
-            }
-            for _ in 0..rng.int(0, 2) {
-                views.push(v3(Vec3::new(
-                    rng.range(-1.0, 1.0),
-                    rng.range(-1.0, 0.2),
-                    rng.range(-1.0, 1.0),
-                )));
-            }
-            let res = rng.int(64, 160);
-            self.parts.push(format!(
-                "  collider: depth maps {res}², {} views",
-                views.len()
-            ));
-            format!(
-                "depth_colliders: [(body: \"body\", params: (views: [{}], resolution: {res}))]",
-                views.join(", ")
-            )
-        };
+        let (collider, resolved) = self.collider(rng, fitted);
         // The cloth: a grid above anything the body's motions can reach at the start.
         let n = [rng.int(10, 28), rng.int(10, 28)];
         let side = fitted.x.max(fitted.z);
@@ -759,6 +706,67 @@ impl Builder {
         let frames = self.frames;
         self.add("keep_snow", keeper("heights", "snow", frames));
         grid
+    }
+
+    /// The cloth's collider for a body of box `fitted`: a distance field (with its Voxelize
+    /// node) or depth maps; its text in the Cloth node, and a field's cell (about; 0 for depth
+    /// maps).
+    fn collider(&mut self, rng: &mut Rng, fitted: Vec3) -> (String, f32) {
+        let by_field = rng.chance(0.7);
+        // A field's cell (about): its contact is exact to about a cell, so ε is drawn no
+        // smaller (the Cloth node warns below it). Depth maps keep the ε drawn: the check
+        // allows them a texel (see `check`).
+        let mut resolved = 0.0f32;
+        let collider = if by_field {
+            let (res, pad, band) = (rng.int(24, 56), rng.range(0.1, 0.2), rng.range(2.0, 4.0));
+            // Fit: the swept box's longest side (the body's, grown by its motion) with padding.
+            resolved = 1.3 * fitted.max_element() * (1.0 + 2.0 * pad) / res as f32;
+            self.add(
+                "vox",
+                format!(
+                    "Voxelize(mesh: \"body\", grid: Fit(resolution: {res}, padding: {}))",
+                    f(pad)
+                ),
+            );
+            self.add(
+                "field",
+                format!(
+                    "DistanceField(boundary: \"vox\", band: {}, measure: Never)",
+                    f(band)
+                ),
+            );
+            self.parts.push(format!(
+                "  collider: distance field {res}³, band {}",
+                f(band)
+            ));
+            "colliders: [\"field\"]".to_string()
+        } else {
+            // T's three axes (top, front, side: fewer leave a body's sides unseen, a known
+            // limit of the method), in a random order, and up to two more directions.
+            let mut views: Vec<String> = ["(0, -1, 0)", "(0, 0, -1)", "(1, 0, 0)"]
+                .map(String::from)
+                .to_vec();
+            for i in (1..views.len()).rev() {
+                views.swap(i, rng.int(0, i as u32) as usize);
+            }
+            for _ in 0..rng.int(0, 2) {
+                views.push(v3(Vec3::new(
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 0.2),
+                    rng.range(-1.0, 1.0),
+                )));
+            }
+            let res = rng.int(64, 160);
+            self.parts.push(format!(
+                "  collider: depth maps {res}², {} views",
+                views.len()
+            ));
+            format!(
+                "depth_colliders: [(body: \"body\", params: (views: [{}], resolution: {res}))]",
+                views.join(", ")
+            )
+        };
+        (collider, resolved)
     }
 
     /// A stamp pressed into a ground and dragged along a path: on its own ground around

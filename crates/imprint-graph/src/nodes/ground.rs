@@ -188,12 +188,10 @@ impl Stage for GroundStage {
             ctx.warn_once("ground above its bound", || {
                 format!(
                     "{above} cell(s) stand above the highest start height plus the layer taken \
-                     in plus the tallest object ({top:.4} m): ground pushed out of a print piles \
-                     against a body that holds it (the ground never spills over an object), or \
-                     stays as needles with relaxation: Labelled; within what was pushed out, so \
-                     counted per frame (above_bound_cells in report.json), not stopped. \
-                     relaxation: Settle spreads such a heap once the body leaves; a shallower \
-                     press or a shorter drag keeps it lower"
+                     in plus the tallest object ({top:.4} m), within what was pushed out of \
+                     prints, so counted per frame (above_bound_cells in report.json), not \
+                     stopped: relaxation: Labelled leaves needles and Full does not spill a heap \
+                     over the body that holds it; relaxation: Settle (the default) does"
                 )
             });
         }
@@ -248,10 +246,10 @@ impl Stage for GroundStage {
 ///   (the snow preset) nothing is pushed out, so this is the start height plus the layer.
 /// - **Above the tallest object** (counted and warned once): above the highest start height
 ///   plus the layer plus the tallest object's vertical extent (its mesh bounds, the largest
-///   seen so far) but within the bound above. That is a known limit of the model, not a
-///   failure: the ground does not spill over a body, so a dragged body's heap leans on its
-///   held face and stands taller than it while the body is down (`tests/ground_settle.rs`),
-///   and `Relaxation::Labelled` leaves needles. Counted per frame (`above_bound_cells`).
+///   seen so far) but within the bound above. The default `Relaxation::Settle` keeps below it
+///   (what a body pushes above its top spills over the body, `tests/ground_settle.rs`); O's
+///   `Labelled` passes leave needles above it and `Full` relaxation does not spill, which are
+///   the models' known limits, not failures. Counted per frame (`above_bound_cells`).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct GroundBounds {
     /// The highest start height, units (from the file's initial heights at build).

@@ -159,12 +159,11 @@ impl Node for VoxelizeNode {
             spec,
             variant: self.variant,
             signed: self.signed,
-            closed: ClosedCache::default(),
             path: match gpu {
-                Some(gpu) => VoxelPath::Gpu(gpu),
+                Some(gpu) => VoxelPath::Gpu(gpu, ClosedCache::default()),
                 None => {
                     let mut vox = Voxelizer::new(spec)?;
-                    vox.signed = false;
+                    vox.signed = self.signed;
                     VoxelPath::Cpu(Box::new(vox))
                 }
             },
@@ -180,14 +179,14 @@ struct VoxelizeStage {
     spec: GridSpec,
     variant: BoundaryVariant,
     signed: bool,
-    /// Whether the mesh is closed, checked again only when its triangles change.
-    closed: ClosedCache,
     path: VoxelPath,
 }
 
 enum VoxelPath {
-    Gpu(&'static GpuContext),
-    /// The CPU voxeliser keeps its scratch between frames.
+    /// With whether the mesh is closed, checked again only when its triangles change.
+    Gpu(&'static GpuContext, ClosedCache),
+    /// The CPU voxeliser keeps its scratch (and knows whether the mesh is closed) between
+    /// frames.
     Cpu(Box<Voxelizer>),
 }
 
@@ -197,7 +196,27 @@ impl Stage for VoxelizeStage {
             return Ok(Step::idle());
         }
         let mesh = ctx.values.mesh(&self.input)?;
-        let signed = self.signed && self.closed.is_closed(mesh);
+        let (b, signed) = match &mut self.path {
+            VoxelPath::Gpu(gpu, closed) => {
+                let signed = self.signed && closed.is_closed(mesh);
+                let b = imprint_stages::voxel::gpu::voxelize_gpu_timed(
+                    gpu,
+                    mesh,
+                    &self.spec,
+                    self.variant,
+                    signed,
+                    None,
+                )?;
+                gpu.wait()?;
+                (BoundaryValue::Gpu(Arc::new(b)), signed)
+            }
+            VoxelPath::Cpu(vox) => {
+                let b = vox.run(mesh, self.variant)?;
+                ctx.metric("boundary_points", b.len());
+                let signed = b.inside.is_some();
+                (BoundaryValue::Cpu(Arc::new(b)), signed)
+            }
+        };
         // In the report, not on stderr: a field that no cloth reads needs no sign.
         if self.signed && ctx.first {
             ctx.metric("signed", signed);
@@ -213,29 +232,9 @@ impl Stage for VoxelizeStage {
                 );
             }
         }
-        let b = match &mut self.path {
-            VoxelPath::Gpu(gpu) => {
-                let b = imprint_stages::voxel::gpu::voxelize_gpu_timed(
-                    gpu,
-                    mesh,
-                    &self.spec,
-                    self.variant,
-                    signed,
-                    None,
-                )?;
-                gpu.wait()?;
-                BoundaryValue::Gpu(Arc::new(b))
-            }
-            VoxelPath::Cpu(vox) => {
-                vox.signed = signed;
-                let b = vox.run(mesh, self.variant)?;
-                ctx.metric("boundary_points", b.len());
-                BoundaryValue::Cpu(Arc::new(b))
-            }
-        };
         Ok(Step::computed(Value::Boundary(b)))
     }
     fn on_gpu(&self) -> bool {
-        matches!(self.path, VoxelPath::Gpu(_))
+        matches!(self.path, VoxelPath::Gpu(..))
     }
 }
