@@ -11,7 +11,7 @@
 //!   IMPRINT_STRESS_FILE=target/stress-failures/seed-9.ron cargo test ... chosen_seeds
 //!                                                     # one pipeline file through the checks
 
-use imprint_tests::stress::check::{is_closed, run_file};
+use imprint_tests::stress::check::run_file;
 use imprint_tests::stress::{Outcome, Scene};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -258,12 +258,12 @@ fn closed_bodies_are_told_from_open_ones() {
         ("stanford-bunny", false),
         ("suzanne", false),
     ] {
-        assert_eq!(is_closed(&imprint_tests::mesh(name)), closed, "{name}");
+        assert_eq!(imprint_tests::mesh(name).is_closed(), closed, "{name}");
     }
-    assert!(is_closed(&uv_sphere(0.5, 16, 8)));
-    assert!(is_closed(&cuboid(glam::Vec3::splat(0.3), 4)));
-    assert!(is_closed(&torus(0.35, 0.1, 16, 8)));
-    assert!(is_closed(&cylinder(0.1, 1.0, 16, 8)));
+    assert!(uv_sphere(0.5, 16, 8).is_closed());
+    assert!(cuboid(glam::Vec3::splat(0.3), 4).is_closed());
+    assert!(torus(0.35, 0.1, 16, 8).is_closed());
+    assert!(cylinder(0.1, 1.0, 16, 8).is_closed());
 }
 
 /// The checker is not vacuous: a cloth started inside a closed sphere with no collider is

@@ -6,7 +6,7 @@
 //! - **cloth-inside-body**: no vertex of a cloth lies inside a closed body it collides with
 //!   (a distance field's mesh, through its Voxelize node, or a depth-map body), by the exact
 //!   inside test ([`InsideTest`]) on the body as published that frame; a body is closed when
-//!   every edge (by vertex position) borders an even number of triangles, which is what the
+//!   every edge borders an even number of triangles (`Mesh::is_closed`), which is what the
 //!   test needs; open bodies (the teapot, the bunny, Suzanne) are skipped and noted. The depth
 //!   of a vertex inside is its exact distance to the surface ([`Bvh`]). A depth-map body is
 //!   seen a texel at a time (T's method): vertices inside by less than a texel (the body's
@@ -31,7 +31,6 @@
 //! the shadow.
 
 use crate::ground::worst_free_difference;
-use glam::Vec3;
 use imprint_core::bvh::Bvh;
 use imprint_core::{HeightField, Mesh};
 use imprint_graph::exec::RunOptions;
@@ -44,7 +43,7 @@ use imprint_stages::skin::measure;
 use imprint_stages::snow::arrival::arrival_cpu;
 use imprint_stages::snow::relax::{self, Scratch};
 use imprint_stages::snow::{QUANTUM, SnowSim};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -162,31 +161,6 @@ pub fn skin_volume_bounds(method: &SkinMethod) -> (f64, f64) {
         SkinMethod::DualQuaternion { .. } => (0.85, 1.15),
         SkinMethod::Linear { .. } => (0.4, 1.1),
     }
-}
-
-/// Whether every edge, keyed by its two end positions, borders an even number of triangles:
-/// a closed surface (or several), which the inside test needs.
-pub fn is_closed(mesh: &Mesh) -> bool {
-    if mesh.triangles.is_empty() {
-        return false;
-    }
-    let key = |p: Vec3| p.to_array().map(f32::to_bits);
-    let mut edges: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (
-                key(mesh.positions[t[k] as usize]),
-                key(mesh.positions[t[(k + 1) % 3] as usize]),
-            );
-            if a == b {
-                continue;
-            }
-            *edges
-                .entry(if a < b { (a, b) } else { (b, a) })
-                .or_default() += 1;
-        }
-    }
-    edges.values().all(|c| c % 2 == 0)
 }
 
 /// Loads `path` as `imprint run` does, runs every frame into `out` on the CPU (whatever the
@@ -445,7 +419,7 @@ fn cloth_frame(c: &mut ClothCheck, ex: &Executor, frame: u32, o: &mut Outcome) {
         let closed = *c
             .closed
             .entry(b.clone())
-            .or_insert_with(|| is_closed(&body));
+            .or_insert_with(|| !body.triangles.is_empty() && body.is_closed());
         if !closed {
             o.note(format!(
                 "'{}': body '{b}' is open, so the inside test does not apply",
