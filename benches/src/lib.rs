@@ -7,6 +7,7 @@ pub mod ground_snow;
 pub mod render;
 pub mod schedule;
 pub mod skin;
+pub mod stages_gpu;
 
 use imprint_core::{DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;

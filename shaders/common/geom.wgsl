@@ -16,6 +16,51 @@ fn rnd3(v: vec3<f32>) -> vec3<f32> {
     return bitcast<vec3<f32>>(bitcast<vec3<u32>>(v) ^ vec3<u32>(geom_zero));
 }
 
+// a / b correctly rounded, as the CPU divides. Vulkan lets `/` be off by 2.5 ulp (NVIDIA's
+// is), enough to move a closest point by an ulp and flip a near-tie the CPU decides the
+// other way, and `fma` need not be fused (lavapipe's is not), so the quotient is formed in
+// integers: 25 bits of the significands' long division, then round to nearest even on the
+// remainder. Zero, subnormal, infinite or NaN operands and results take the plain `/`.
+fn div_rn(a: f32, b: f32) -> f32 {
+    let ba = bitcast<u32>(a);
+    let bb = bitcast<u32>(b);
+    let ea = (ba >> 23u) & 0xffu;
+    let eb = (bb >> 23u) & 0xffu;
+    if ea == 0u || eb == 0u || ea == 0xffu || eb == 0xffu {
+        return a / b;
+    }
+    let mb = (bb & 0x7fffffu) | 0x800000u;
+    var r = (ba & 0x7fffffu) | 0x800000u;
+    var e = i32(ea) - i32(eb) + 127;
+    if r < mb {
+        r <<= 1u;
+        e -= 1;
+    }
+    // mb <= r < 2 mb: the quotient is in [1, 2); 24 significand bits and a round bit.
+    var q = 0u;
+    for (var i = 0u; i < 25u; i++) {
+        q <<= 1u;
+        if r >= mb {
+            r -= mb;
+            q |= 1u;
+        }
+        r <<= 1u;
+    }
+    let round = q & 1u;
+    q >>= 1u;
+    if round == 1u && (r != 0u || (q & 1u) == 1u) {
+        q += 1u;
+    }
+    if q == 0x1000000u {
+        q >>= 1u;
+        e += 1;
+    }
+    if e <= 0 || e >= 255 {
+        return a / b;
+    }
+    return bitcast<f32>(((ba ^ bb) & 0x80000000u) | (u32(e) << 23u) | (q & 0x7fffffu));
+}
+
 fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return rnd(a.x * b.x) + rnd(a.y * b.y) + rnd(a.z * b.z);
 }
@@ -35,7 +80,7 @@ fn closest_on_segment(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     if l2 <= 0.0 {
         return a;
     }
-    return a + rnd3(ab * clamp(dot3(p - a, ab) / l2, 0.0, 1.0));
+    return a + rnd3(ab * clamp(div_rn(dot3(p - a, ab), l2), 0.0, 1.0));
 }
 
 // Collinear vertices not caught by the Voronoi regions: the closest of the three edges.
@@ -76,7 +121,7 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     }
     let vc = rnd(d1 * d4) - rnd(d3 * d2);
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let v = d1 / (d1 - d3);
+        let v = div_rn(d1, d1 - d3);
         return a + rnd3(v * ab);
     }
     let cp = p - c;
@@ -87,12 +132,12 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     }
     let vb = rnd(d5 * d2) - rnd(d1 * d6);
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let w = d2 / (d2 - d6);
+        let w = div_rn(d2, d2 - d6);
         return a + rnd3(w * ac);
     }
     let va = rnd(d3 * d6) - rnd(d5 * d4);
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        let w = div_rn(d4 - d3, (d4 - d3) + (d5 - d6));
         return b + rnd3(w * (c - b));
     }
     let denom = va + vb + vc;
@@ -100,7 +145,7 @@ fn closest_point_on_triangle(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f
     if abs(denom) <= 1.17549435e-38 || !(abs(denom) <= 3.40282347e38) {
         return closest_on_degenerate(p, a, b, c);
     }
-    let inv = 1.0 / denom;
+    let inv = div_rn(1.0, denom);
     let v = vb * inv;
     let w = vc * inv;
     return a + rnd3(ab * v) + rnd3(ac * w);

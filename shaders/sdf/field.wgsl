@@ -25,11 +25,11 @@ struct FieldParams {
     // xyz: world position of cell (0, 0, 0)'s centre; w: cell edge (world units).
     origin: vec4<f32>,
     // Half-width of the band in cells (a), a*a as the CPU computes it, the distance of far
-    // cells (a * cell), and the correctly rounded 1 / cell.
+    // cells (a * cell).
     band: f32,
     band2: f32,
     far_value: f32,
-    inv_cell: f32,
+    _pad3: u32,
     // scatter: 0 = minimum distance, 1 = minimum point at that distance.
     mode: u32,
     // 1 when the boundary is the Centre variant (points at cell centres).
@@ -76,12 +76,9 @@ fn coords(idx: u32) -> vec3<u32> {
     return vec3<u32>(idx % nx, (idx / nx) % ny, idx / (nx * ny));
 }
 
-// x / cell correctly rounded (Markstein: one fma correction of x * RN(1/cell)), as the CPU's
-// division is; WGSL's `/` may be off by an ulp or two.
+// x / cell correctly rounded, as the CPU's division is (WGSL's `/` may be ulps off).
 fn div_cell(x: f32) -> f32 {
-    let q = x * params.inv_cell;
-    let r = fma(-q, params.origin.w, x);
-    return fma(r, params.inv_cell, q);
+    return div_rn(x, params.origin.w);
 }
 
 // The grid coordinates the CPU field works with for the boundary point of surface cell s:

@@ -76,7 +76,7 @@ fn mark(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             let e2 = edge(a2, b2, r);
             if covers(e0, c2 - b2) && covers(e1, a2 - c2) && covers(e2, b2 - a2) {
                 let den = (e0 + e1) + e2;
-                let x = (rnd(e0 * a.x) + rnd(e1 * b.x) + rnd(e2 * c.x)) / den;
+                let x = div_rn(rnd(e0 * a.x) + rnd(e1 * b.x) + rnd(e2 * c.x), den);
                 let first = max(floor(clamp(x, -1.0, nx)) + 1.0, 0.0);
                 if den > 0.0 && first < nx {
                     let row = u32(y) + params.dims.y * u32(z);

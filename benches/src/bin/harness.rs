@@ -6,7 +6,8 @@
 //! cow, both boundary variants, (2) one shape at 10k, 100k and 1M triangles (H's claim: field
 //! cost follows area, not triangle count); `baselines` — (3) the same meshes and grid through
 //! OpenVDB and Open3D, in the same run, via benches/compare/baselines.py; `gpu` — (4) the GPU
-//! path when an adapter exists; `render` — (5) frames and depth maps.
+//! path when an adapter exists; `render` — (5) frames and depth maps; … `stages_gpu` — (12)
+//! each stage with a GPU path (cloth, ground, snow, skinning), GPU against CPU per frame.
 //!
 //! Each section is written to `benches/results/<name>.md` with its own date, machine and load,
 //! so one section can be re-measured without re-running (or losing) the others;
@@ -23,7 +24,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 10] = [
+const SECTIONS: [(&str, &str); 11] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -43,6 +44,10 @@ const SECTIONS: [(&str, &str); 10] = [
         "the cloth's colliders: distance field and depth maps",
     ),
     ("skin", "skinning: particles, LBS and DQS"),
+    (
+        "stages_gpu",
+        "each stage with a GPU path, GPU against CPU per frame",
+    ),
 ];
 
 fn main() {
@@ -96,6 +101,7 @@ fn main() {
             "drape" => imprint_benches::drape::section(&root, repeat),
             "colliders" => imprint_benches::colliders::section(&root, repeat),
             "skin" => imprint_benches::skin::section(&root, repeat),
+            "stages_gpu" => imprint_benches::stages_gpu::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(

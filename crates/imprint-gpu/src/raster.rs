@@ -5,29 +5,32 @@
 //! ([`shader_module`]), error-checked creation ([`checked`]), vertex and index buffers that
 //! grow and are reused ([`GrowingBuffer`]), and texture readback ([`TextureReadback`]).
 //!
-//! # Depth maps, and why the depth is not read from the depth buffer
+//! # Depth maps, and where their depth comes from
 //!
 //! One render pass draws the mesh into a Depth32Float buffer (the nearest-surface test) and an
 //! Rg32Float colour target that receives, per covered pixel, (view depth, 1); the colour target
-//! is cleared to 0, so its second channel is the coverage and its first the depth map. The
-//! view depth is a varying interpolated perspective-correctly, i.e. `1 / lerp(1 / d)`, which is
-//! what the CPU computes, to float rounding, whatever the near and far planes.
+//! is cleared to 0, so its second channel is the coverage and its first the depth map.
 //!
-//! Decoding the depth buffer instead would tie the precision to the projection: with the
-//! conventional NDC mapping and the default 1e-3 near plane, a Depth32Float value near 1
-//! resolves view depth d only to about `6e-8 * d² / near` (2e-4 relative at d = 3, some 500×
-//! the 99th-percentile difference measured with the varying, below). The depth buffer itself uses reversed depth for perspective
-//! cameras (near → 1, far → 0), which keeps ~24 bits of relative precision at every distance,
-//! so the nearest-surface decision is as sharp as the CPU's; orthographic cameras keep the
+//! The view depth is neither read from the depth buffer (whose non-linear encoding, with the
+//! default 1e-3 near plane, resolves depth d only to about `6e-8 * d² / near`) nor the
+//! hardware's interpolated varying: a GPU interpolates over its snapped vertices (NVIDIA's
+//! does; lavapipe's interpolates over the unsnapped ones), and on a steep triangle the snap
+//! times the slope moved heights by 2.6 mm on an H100 where the CPU's plane (fitted through
+//! the unsnapped vertices) did not move. So the vertex stage pulls the whole triangle from
+//! storage buffers, computes the CPU's pixel coordinates and depth plane (`shaders/render/
+//! depth.wgsl`), and each fragment evaluates that plane at its pixel centre and writes the
+//! result to the depth buffer as well, so the nearest-surface decision follows it too. The
+//! depth buffer uses reversed depth for perspective cameras (near → 1, far → 0), which keeps
+//! ~24 bits of relative precision at every distance; orthographic cameras keep the
 //! conventional mapping, which is linear and precise there (`shaders/render/camera.wgsl`).
 //!
-//! Everything else follows the hardware rules that the CPU rasteriser copies: pixel centres at
-//! +0.5, the top-left fill rule, 1/256-pixel vertex snapping (Mesa's llvmpipe snaps to 8
-//! subpixel bits too), clipping at the near and far planes, earlier triangles winning exact
-//! ties (strict depth test, draws in index order). On lavapipe the coverage is identical to
-//! the CPU's on every test scene and the depth agrees to 4e-7 relative at the 99th percentile
-//! (largest 2e-5, at grazing incidence); other hardware may differ on a few silhouette pixels,
-//! where a pixel centre lies within rounding of an edge (`tests/tests/gpu_raster.rs`).
+//! Coverage follows the hardware rules that the CPU rasteriser copies: pixel centres at +0.5,
+//! the top-left fill rule, 1/256-pixel vertex snapping, clipping at the near and far planes,
+//! earlier triangles winning exact ties (strict depth test, draws in order). On lavapipe and
+//! on an H100 the coverage is identical to the CPU's on every test scene, and on lavapipe the
+//! depth agrees to 1.2e-7 relative at the 99th percentile (largest 9e-6, at grazing
+//! incidence); other hardware may differ on a few silhouette pixels, where a pixel centre lies
+//! within rounding of an edge (`tests/tests/gpu_raster.rs`).
 
 use crate::{GpuContext, shader};
 use imprint_core::camera::Camera;
@@ -385,8 +388,10 @@ pub struct GpuRasterizer {
     layout: wgpu::PipelineLayout,
     /// By `reversed as usize * 2 + cull_back as usize`, built on first use.
     pipelines: [Option<wgpu::RenderPipeline>; 4],
+    group: wgpu::BindGroupLayout,
     view: wgpu::Buffer,
-    bind: wgpu::BindGroup,
+    /// The image's size, centre and scale (`Image` in depth.wgsl).
+    image: wgpu::Buffer,
     vertices: GrowingBuffer,
     indices: GrowingBuffer,
     target: Option<Target>,
@@ -397,9 +402,37 @@ impl GpuRasterizer {
         let module = shader_module(
             ctx,
             "render/depth.wgsl",
-            &[shader!("render/camera.wgsl"), shader!("render/depth.wgsl")],
+            &[
+                shader!("render/camera.wgsl"),
+                shader!("common/geom.wgsl"),
+                shader!("render/depth.wgsl"),
+            ],
         )?;
-        let group = view_layout(ctx, &[]);
+        let entry = |binding, visibility, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let storage = wgpu::BufferBindingType::Storage { read_only: true };
+        let uniform = wgpu::BufferBindingType::Uniform;
+        let (vertex, fragment) = (wgpu::ShaderStages::VERTEX, wgpu::ShaderStages::FRAGMENT);
+        // The view, the image size, and the mesh pulled by the vertex stage (depth.wgsl).
+        let group = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("depth map"),
+                entries: &[
+                    entry(0, vertex | fragment, uniform),
+                    entry(1, vertex | fragment, uniform),
+                    entry(2, vertex, storage),
+                    entry(3, vertex, storage),
+                ],
+            });
         let layout = ctx
             .device
             .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -408,24 +441,41 @@ impl GpuRasterizer {
                 immediate_size: 0,
             });
         let view = ctx.uniform_buffer("depth map view", &<GpuView as bytemuck::Zeroable>::zeroed());
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("depth map view"),
-            layout: &group,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: view.as_entire_binding(),
-            }],
-        });
+        let image = ctx.uniform_buffer("depth map image", &[0.0f32; 8]);
+        let storage = wgpu::BufferUsages::STORAGE;
         Ok(GpuRasterizer {
             device: ctx.device.clone(),
             module,
             layout,
+            group,
             pipelines: Default::default(),
             view,
-            bind,
-            vertices: GrowingBuffer::new("depth map vertices", wgpu::BufferUsages::VERTEX),
-            indices: GrowingBuffer::new("depth map indices", wgpu::BufferUsages::INDEX),
+            image,
+            vertices: GrowingBuffer::new("depth map vertices", storage),
+            indices: GrowingBuffer::new("depth map indices", storage),
             target: None,
+        })
+    }
+
+    /// The pass's bind group: made per map, as the mesh buffers may have grown.
+    fn bind_group(
+        &self,
+        ctx: &GpuContext,
+        vertices: &wgpu::Buffer,
+        indices: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let buffers = [&self.view, &self.image, vertices, indices];
+        let entries: Vec<wgpu::BindGroupEntry> = (0u32..)
+            .zip(buffers)
+            .map(|(binding, buffer)| wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            })
+            .collect();
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("depth map"),
+            layout: &self.group,
+            entries: &entries,
         })
     }
 
@@ -448,11 +498,8 @@ impl GpuRasterizer {
                         module: &self.module,
                         entry_point: Some("vs_depth"),
                         compilation_options: Default::default(),
-                        buffers: &[Some(wgpu::VertexBufferLayout {
-                            array_stride: 12,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                        })],
+                        // Pulled from storage buffers (depth.wgsl).
+                        buffers: &[],
                     },
                     primitive: wgpu::PrimitiveState {
                         topology: wgpu::PrimitiveTopology::TriangleList,
@@ -567,6 +614,12 @@ impl GpuRasterizer {
         let pipeline = self.pipeline(ctx, view.reversed(), opts.cull_back)?;
         ctx.queue
             .write_buffer(&self.view, 0, bytemuck::bytes_of(&view));
+        // `Image` in depth.wgsl: the CPU's Projector numbers, bit for bit.
+        let k = height as f32 / (2.0 * camera.half_height_scale());
+        let (w, h) = (width as f32, height as f32);
+        let image = [w, h, 0.5 * w, 0.5 * h, k, 0.0, 0.0, 0.0];
+        ctx.queue
+            .write_buffer(&self.image, 0, bytemuck::bytes_of(&image));
         let index_count = u32::try_from(mesh.triangles.len() * 3).map_err(|_| {
             Error::Invalid(format!(
                 "GPU rasteriser: {} triangles do not fit 32-bit draw counts",
@@ -576,7 +629,7 @@ impl GpuRasterizer {
         let positions: &[[f32; 3]] = bytemuck::cast_slice(&mesh.positions);
         let vertices = self.vertices.write(ctx, positions)?.clone();
         let indices = self.indices.write(ctx, &mesh.triangles)?.clone();
-        let bind = self.bind.clone();
+        let bind = self.bind_group(ctx, &vertices, &indices);
         let target = self.target(ctx, width, height)?;
         let mut encoder = ctx
             .device
@@ -608,9 +661,7 @@ impl GpuRasterizer {
             if index_count > 0 {
                 pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &bind, &[]);
-                pass.set_vertex_buffer(0, vertices.slice(..));
-                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..index_count, 0, 0..1);
+                pass.draw(0..index_count, 0..1);
             }
         }
         target.readback.copy(&mut encoder, &target.color_texture);
