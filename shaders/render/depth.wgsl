@@ -41,12 +41,11 @@ struct DepthOut {
     @location(0) @interpolate(flat) anchor: vec4<f32>,
     // The depth quantity's change per pixel along x and y.
     @location(1) @interpolate(flat) slope: vec2<f32>,
-    // The triangle's nearest and farthest view depth: rounding at grazing incidence stays
-    // within them.
-    @location(2) @interpolate(flat) range: vec2<f32>,
     // The hardware's interpolated view depth, where the plane is not valid: a perspective
     // triangle reaching behind the near plane (the CPU fits its plane after clipping there).
-    @location(3) depth: f32,
+    // The plane is not clamped to the triangle's depths: at a pixel centre that snapping
+    // covers just outside the triangle, the CPU extrapolates it too.
+    @location(2) depth: f32,
 }
 
 // World point -> view coordinates, in the order and roundings of Frame::to_view.
@@ -79,7 +78,6 @@ fn vs_depth(@builtin(vertex_index) vi: u32) -> DepthOut {
     let vb = corner(t, 1u);
     let vc = corner(t, 2u);
     let lo = min(min(va.z, vb.z), vc.z);
-    let hi = max(max(va.z, vb.z), vc.z);
     let a = screen(va);
     let b = screen(vb);
     let c = screen(vc);
@@ -96,7 +94,7 @@ fn vs_depth(@builtin(vertex_index) vi: u32) -> DepthOut {
     }
     let valid = !is_perspective() || lo > 0.0;
     let v = corner(t, vi % 3u);
-    return DepthOut(to_clip(v), vec4<f32>(a, select(0.0, 1.0, valid)), slope, vec2<f32>(lo, hi), v.z);
+    return DepthOut(to_clip(v), vec4<f32>(a, select(0.0, 1.0, valid)), slope, v.z);
 }
 
 struct DepthFrag {
@@ -116,7 +114,6 @@ fn fs_depth(in: DepthOut) -> DepthFrag {
             d = in.depth;
         }
     }
-    d = clamp(d, in.range.x, in.range.y);
     let z_clip = view.depth.x * d + view.depth.y;
     let z = select(z_clip, z_clip / d, is_perspective());
     return DepthFrag(clamp(z, 0.0, 1.0), vec2<f32>(d, 1.0));

@@ -393,7 +393,8 @@ fn a_run_that_starts_posed_starts_from_the_pose() {
     let first_frame = |place: bool| {
         let mut skin = ParticleSkin::new(&mesh, &rig.rest_segments(), &Default::default()).unwrap();
         if place {
-            skin.place(&rig.rest_segments(), &posed).unwrap();
+            let w = skin.segment_weights(&rig.rest_segments());
+            skin.place(&w, &posed).unwrap();
         }
         skin.step_frame(&posed, &posed, 0, DT)
             .unwrap()
@@ -408,7 +409,8 @@ fn a_run_that_starts_posed_starts_from_the_pose() {
     let rest = bend(&rig, 0.0).skin;
     let mut a = ParticleSkin::new(&mesh, &rig.rest_segments(), &Default::default()).unwrap();
     let mut b = a.clone();
-    b.place(&rig.rest_segments(), &rest).unwrap();
+    let w = b.segment_weights(&rig.rest_segments());
+    b.place(&w, &rest).unwrap();
     a.step_frame(&rest, &rest, 0, DT).unwrap();
     b.step_frame(&rest, &rest, 0, DT).unwrap();
     assert_eq!(a.vertices(), b.vertices());

@@ -1,11 +1,14 @@
 //! imprint-core: the math and data every stage shares, with no knowledge of wgpu or the graph.
 //!
 //! - [`mesh`]: triangle meshes (OBJ loading through tobj, validation, procedural primitives);
+//! - [`mesh_formats`]: [`load_mesh`], any supported mesh file (OBJ, PLY, STL, glTF) by content;
 //! - [`grid`]: the uniform cell grid ([`GridSpec`]) and dense 3D arrays ([`Grid3`]);
 //! - [`geom`]: bounding boxes, closest point on a triangle, triangle/box overlap;
 //! - [`bvh`]: an exact closest-point query on a mesh, the reference every error is measured against;
 //! - [`camera`], [`raster`]: cameras and the CPU depth rasteriser (`DepthMap`), the reference for
 //!   the depth-buffer methods (draping, snow, ground contact);
+//! - [`gltf`]: glTF 2.0 input: the skinned mesh, its skin and clips, and posing them by
+//!   linear blend skinning;
 //! - [`field`]: the discrete boundary and distance-field resources;
 //! - [`io`]: atomic file writing (nothing half-written under a final name);
 //! - [`error`]: the error type and what each kind means as an exit code.
@@ -15,10 +18,12 @@ pub mod camera;
 pub mod error;
 pub mod field;
 pub mod geom;
+pub mod gltf;
 pub mod grid;
 pub mod heightfield;
 pub mod io;
 pub mod mesh;
+pub mod mesh_formats;
 pub mod raster;
 
 pub use camera::Camera;
@@ -28,6 +33,7 @@ pub use geom::Aabb;
 pub use grid::{Grid3, GridSpec};
 pub use heightfield::HeightField;
 pub use mesh::Mesh;
+pub use mesh_formats::load_mesh;
 pub use raster::DepthMap;
 
 pub use glam;

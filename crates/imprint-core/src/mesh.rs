@@ -49,45 +49,59 @@ impl Mesh {
         }
     }
 
+    /// The mesh with vertices at the same position merged (exact bit patterns; the first
+    /// index wins), normals recomputed and texture coordinates dropped: files split vertices
+    /// along UV seams, which leaves an otherwise closed surface with "holes" by index that
+    /// [`Mesh::close_holes`] cannot tell from real ones.
+    pub fn welded(&self) -> Mesh {
+        self.welded_with_map().0
+    }
+
+    /// [`Mesh::welded`] and, per vertex of the result, the vertex of `self` it was first
+    /// (to carry per-vertex data such as skin weights across).
+    pub fn welded_with_map(&self) -> (Mesh, Vec<u32>) {
+        let mut first = std::collections::HashMap::new();
+        let mut positions = Vec::new();
+        let mut origin = Vec::new();
+        let remap: Vec<u32> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *first
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert_with(|| {
+                        origin.push(i as u32);
+                        positions.push(*p);
+                        positions.len() as u32 - 1
+                    })
+            })
+            .collect();
+        let mut m = Mesh {
+            positions,
+            triangles: self
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| remap[v as usize]))
+                .collect(),
+            normals: Vec::new(),
+            uvs: None,
+        };
+        m.compute_normals();
+        (m, origin)
+    }
+
     /// Closes the mesh's holes: each loop of boundary edges (an edge of one triangle only, by
     /// vertex index) is filled with a fan around the loop's centroid, wound to match its
     /// neighbours, so that a scanned body with an open base (the Stanford bunny) has an inside
-    /// and a signed field. Returns the number of holes filled. A loop through a vertex where
-    /// boundaries meet (two ways on) is left open; so is a mesh that is not welded (every
-    /// triangle would be a hole): [`Mesh::is_closed`] tells whether it worked.
+    /// and a signed field. Where boundaries meet at a vertex (two ways on), the walk takes
+    /// the smallest unused way, which splits the boundary into closed loops all the same.
+    /// Returns the number of holes filled. A mesh that is not welded (every triangle would
+    /// be a hole: see [`Mesh::welded`]) is left open; [`Mesh::is_closed`] tells whether it
+    /// worked.
     pub fn close_holes(&mut self) -> usize {
-        use std::collections::{BTreeMap, BTreeSet};
-        let directed: BTreeSet<(u32, u32)> = self
-            .triangles
-            .iter()
-            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-            .collect();
-        // A boundary edge a → b has no twin b → a; the hole runs the other way, b → a.
-        let mut next: BTreeMap<u32, Option<u32>> = BTreeMap::new();
-        for &(a, b) in &directed {
-            if !directed.contains(&(b, a)) {
-                next.entry(b).and_modify(|n| *n = None).or_insert(Some(a));
-            }
-        }
         let mut filled = 0;
-        let mut seen = BTreeSet::new();
-        let starts: Vec<u32> = next.keys().copied().collect();
-        for start in starts {
-            let mut lp = Vec::new();
-            let mut v = start;
-            let closed = loop {
-                if !seen.insert(v) {
-                    break v == start && lp.len() >= 3;
-                }
-                lp.push(v);
-                match next.get(&v) {
-                    Some(Some(n)) => v = *n,
-                    _ => break false,
-                }
-            };
-            if !closed {
-                continue;
-            }
+        for lp in self.boundary_loops() {
             let c = lp.iter().map(|&i| self.positions[i as usize]).sum::<Vec3>() / lp.len() as f32;
             let ci = self.positions.len() as u32;
             self.positions.push(c);
@@ -101,6 +115,44 @@ impl Mesh {
             self.compute_normals();
         }
         filled
+    }
+
+    /// The holes' boundaries as closed loops of vertex indices, each running against its
+    /// triangles (so a fan over it is wound like them); loops of fewer than 3 vertices, and
+    /// walks that cannot close, are left out.
+    fn boundary_loops(&self) -> Vec<Vec<u32>> {
+        use std::collections::{BTreeMap, BTreeSet};
+        let directed: BTreeSet<(u32, u32)> = self
+            .triangles
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        // A boundary edge a → b has no twin b → a; the hole runs the other way, b → a.
+        let mut ways: BTreeMap<u32, BTreeSet<u32>> = BTreeMap::new();
+        for &(a, b) in &directed {
+            if !directed.contains(&(b, a)) {
+                ways.entry(b).or_default().insert(a);
+            }
+        }
+        let mut loops = Vec::new();
+        while let Some((&start, _)) = ways.iter().find(|(_, w)| !w.is_empty()) {
+            let mut lp = vec![start];
+            let mut v = start;
+            let closed = loop {
+                let Some(n) = ways.get_mut(&v).and_then(|w| w.pop_first()) else {
+                    break false;
+                };
+                if n == start {
+                    break true;
+                }
+                lp.push(n);
+                v = n;
+            };
+            if closed && lp.len() >= 3 {
+                loops.push(lp);
+            }
+        }
+        loops
     }
 
     /// Builds a mesh from positions and triangles, validating it and computing normals.
@@ -525,6 +577,57 @@ mod tests {
         assert!(v > 0.97 * full && v < full, "{v} vs {full}");
         // Nothing left to close.
         assert_eq!(cut.close_holes(), 0);
+    }
+
+    /// A box split along a seam (each face with its own four corners, as files split
+    /// vertices for texture coordinates) is open by index: welding makes it closed again,
+    /// with 8 vertices, and the map names a first vertex at each corner.
+    #[test]
+    fn welding_closes_a_mesh_split_at_seams() {
+        let c = primitives::cuboid(Vec3::ONE, 1);
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        for t in &c.triangles {
+            let base = positions.len() as u32;
+            positions.extend(t.map(|v| c.positions[v as usize]));
+            triangles.push([base, base + 1, base + 2]);
+        }
+        let split = Mesh::new(positions, triangles, "split box").unwrap();
+        assert_eq!(split.boundary_loops().len(), 12);
+        let (w, origin) = split.welded_with_map();
+        assert_eq!(w.positions.len(), 8);
+        assert!(w.is_closed() && w.boundary_loops().is_empty());
+        for (v, &o) in origin.iter().enumerate() {
+            assert_eq!(w.positions[v], split.positions[o as usize]);
+        }
+    }
+
+    /// Two holes that touch at one vertex (a bow tie of boundary) are both closed: the walk
+    /// splits the boundary into two loops there.
+    #[test]
+    fn holes_meeting_at_a_vertex_are_both_closed() {
+        let s = primitives::uv_sphere(1.0, 16, 8);
+        // Drop two triangles that share exactly one vertex: their holes meet there.
+        let shared = s.triangles[20][0];
+        let other = (0..s.triangles.len())
+            .find(|&t| {
+                t != 20
+                    && s.triangles[t].contains(&shared)
+                    && s.triangles[t]
+                        .iter()
+                        .filter(|v| s.triangles[20].contains(v))
+                        .count()
+                        == 1
+            })
+            .unwrap();
+        let kept: Vec<[u32; 3]> = (0..s.triangles.len())
+            .filter(|&t| t != 20 && t != other)
+            .map(|t| s.triangles[t])
+            .collect();
+        let mut cut = Mesh::new(s.positions.clone(), kept, "bow tie").unwrap();
+        assert!(!cut.is_closed());
+        assert_eq!(cut.close_holes(), 2);
+        assert!(cut.is_closed());
     }
 
     #[test]

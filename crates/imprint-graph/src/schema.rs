@@ -54,7 +54,7 @@ macro_rules! node_kinds {
 
 // Adding a node kind: its module in `nodes/` (registered there with `pub mod`) and a line here.
 node_kinds! {
-    /// A mesh from an OBJ file or a primitive, fitted and moved (output: Mesh).
+    /// A mesh from a file (OBJ, PLY, STL, glTF) or a primitive, fitted and moved (output: Mesh).
     Mesh(MeshParams),
     /// Surface voxelisation into a discrete boundary (input: Mesh; output: Boundary).
     Voxelize(VoxelizeNode),
@@ -62,7 +62,8 @@ node_kinds! {
     DistanceField(FieldNode),
     /// Writes a field per frame as .npy + JSON and PNG slices (input: DistanceField; a writer).
     WriteField(WriteFieldNode),
-    /// Writes a mesh per frame as OBJ or PLY, for other tools (input: Mesh; a writer).
+    /// Writes a mesh per frame as OBJ or PLY, or the whole run as one animated GLB, for
+    /// other tools (input: Mesh; a writer).
     WriteMesh(WriteMeshNode),
     /// A mass-spring cloth (Harada, or Tokoi's material) pushed by distance fields (inputs:
     /// DistanceField colliders; output: Mesh, so every mesh consumer takes it).
@@ -135,6 +136,9 @@ pub(crate) mod defaults {
     }
     pub fn one() -> u32 {
         1
+    }
+    pub fn one_f32() -> f32 {
+        1.0
     }
     pub fn padding() -> f32 {
         0.1

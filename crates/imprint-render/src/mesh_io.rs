@@ -1,12 +1,17 @@
-//! Mesh files: Wavefront OBJ (text) and binary little-endian PLY, written through
-//! [`atomic_write`] (a reader never finds a half-written file under its final name).
+//! Mesh files: Wavefront OBJ (text) and binary little-endian PLY, one per frame, and a whole
+//! run's frames as one animated glTF binary ([`MeshSequence`], [`write_glb`]), all written
+//! through [`atomic_write`] (a reader never finds a half-written file under its final name).
 //!
 //! Floats are written with Rust's `{}` Display for f32, which prints the shortest decimal that
 //! parses back to the same f32, so positions, normals and uvs round-trip bit-exactly.
 //! Non-finite values are refused (the write fails and no file appears).
 
-use imprint_core::io::atomic_write;
-use imprint_core::{Mesh, Result};
+use imprint_core::glam::{Vec2, Vec3};
+use imprint_core::io::{atomic_write, atomic_write_bytes};
+use imprint_core::{Error, Mesh, Result};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value as Json, json};
+use std::collections::HashMap;
 use std::io::Error as IoError;
 use std::path::Path;
 
@@ -156,6 +161,441 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
         }
         Ok(())
     })
+}
+
+/// A mesh's frames, kept for one whole-run file ([`write_glb`]): every frame's positions (and
+/// normals), and the distinct topologies (triangles and uvs) once each, so a deforming mesh
+/// holds its triangles once however many frames it has. Serialisable, so a checkpoint keeps
+/// the frames written so far and a resumed run's file holds them all.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeshSequence {
+    frames: Vec<SequenceFrame>,
+    topologies: Vec<Topology>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct SequenceFrame {
+    frame: u32,
+    /// Index into [`MeshSequence::topologies`].
+    topology: usize,
+    positions: Vec<Vec3>,
+    /// One per vertex, or empty when the mesh had none.
+    normals: Vec<Vec3>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Topology {
+    vertices: usize,
+    triangles: Vec<[u32; 3]>,
+    uvs: Option<Vec<Vec2>>,
+}
+
+impl MeshSequence {
+    /// Adds `mesh` as frame `frame`. Frames at or after `frame` are dropped first, so a run
+    /// that steps back (a seek, a restored checkpoint) and forward again keeps one copy of
+    /// each frame, in order. A mesh the file could not hold (no triangles, a non-finite
+    /// coordinate, an index past the vertices) is refused here, at the frame that has it.
+    pub fn push(&mut self, frame: u32, mesh: &Mesh) -> Result<()> {
+        check_for_glb(frame, mesh)?;
+        self.frames.retain(|f| f.frame < frame);
+        let kept = self.frames.last().map_or(0, |f| f.topology + 1);
+        self.topologies.truncate(kept);
+        let uvs = mesh.uvs.clone().filter(|u| u.len() == mesh.positions.len());
+        let topology = Topology {
+            vertices: mesh.positions.len(),
+            triangles: mesh.triangles.clone(),
+            uvs,
+        };
+        if self.topologies.last() != Some(&topology) {
+            self.topologies.push(topology);
+        }
+        let normals = if mesh.normals.len() == mesh.positions.len() {
+            mesh.normals.clone()
+        } else {
+            Vec::new()
+        };
+        self.frames.push(SequenceFrame {
+            frame,
+            topology: self.topologies.len() - 1,
+            positions: mesh.positions.clone(),
+            normals,
+        });
+        Ok(())
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// The frame numbers held, in order.
+    pub fn frame_numbers(&self) -> Vec<u32> {
+        self.frames.iter().map(|f| f.frame).collect()
+    }
+
+    /// Whether every frame has the same triangles (and vertex count and uvs): the file then
+    /// animates one mesh by morph targets.
+    pub fn shares_topology(&self) -> bool {
+        self.topologies.len() <= 1
+    }
+
+    /// Each frame's animation time, s: `(frame - first frame) / fps`, so the file plays from 0
+    /// whatever frame the run started at.
+    fn times(&self, fps: f32) -> Vec<f32> {
+        let first = self.frames.first().map_or(0, |f| f.frame);
+        self.frames
+            .iter()
+            .map(|f| (f.frame - first) as f32 / fps)
+            .collect()
+    }
+}
+
+/// What a glTF file needs of a frame's mesh.
+fn check_for_glb(frame: u32, mesh: &Mesh) -> Result<()> {
+    let bad = |what: String| {
+        Err(Error::Invalid(format!(
+            "frame {frame}: {what}; no GLB frame kept"
+        )))
+    };
+    if mesh.triangles.is_empty() {
+        return bad("the mesh has no triangles".into());
+    }
+    let finite = |v: &[Vec3]| v.iter().position(|p| !p.is_finite());
+    if let Some(j) = finite(&mesh.positions) {
+        return bad(format!("position {j} is not finite"));
+    }
+    if let Some(j) = finite(&mesh.normals) {
+        return bad(format!("normal {j} is not finite"));
+    }
+    if let Some(uvs) = &mesh.uvs
+        && let Some(j) = uvs.iter().position(|t| !t.is_finite())
+    {
+        return bad(format!("uv {j} is not finite"));
+    }
+    let n = mesh.positions.len();
+    if let Some(t) = mesh
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&i| i as usize >= n))
+    {
+        return bad(format!("triangle {t} indexes past the {n} vertices"));
+    }
+    Ok(())
+}
+
+/// Writes `seq` as one glTF 2.0 binary (`.glb`) that Blender and three.js play at `fps`;
+/// `name` names the scene's node, mesh and animation.
+///
+/// - Every frame with the same triangles (a moving or deforming mesh): one mesh whose base is
+///   frame 0 and one morph target per frame (position deltas from frame 0, and normal deltas
+///   when every frame has normals), animated by a `weights` channel with STEP interpolation,
+///   one key per frame at `(frame - first) / fps`, the key's weights one-hot on its frame.
+/// - Triangles that change: one node per frame under a root node, each with its own mesh
+///   (index buffers shared between frames with the same triangles), shown by a STEP `scale`
+///   animation: scale 1 from its frame's time to the next frame's, 0 otherwise.
+/// - One frame: the mesh alone, no animation.
+///
+/// The file is rebuilt whole, in memory, on every call: its size is about the frames'
+/// vertices × 12 bytes (× 2 with normals). Atomic: a failed write leaves the previous file.
+pub fn write_glb(path: &Path, seq: &MeshSequence, fps: f32, name: &str) -> Result<()> {
+    atomic_write_bytes(path, &glb_bytes(seq, fps, name)?)
+}
+
+/// The bytes [`write_glb`] writes.
+pub fn glb_bytes(seq: &MeshSequence, fps: f32, name: &str) -> Result<Vec<u8>> {
+    if seq.is_empty() {
+        return Err(Error::Invalid(format!("GLB '{name}': no frames to write")));
+    }
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(Error::Invalid(format!(
+            "GLB '{name}': fps {fps} is not positive"
+        )));
+    }
+    let mut b = GlbBuilder::default();
+    let mut doc = if seq.len() == 1 {
+        static_document(seq, name, &mut b)
+    } else if seq.shares_topology() {
+        morph_document(seq, fps, name, &mut b)
+    } else {
+        node_per_frame_document(seq, fps, name, &mut b)
+    };
+    doc["asset"] = json!({"version": "2.0", "generator": "imprint"});
+    doc["buffers"] = json!([{"byteLength": b.bin.len()}]);
+    doc["bufferViews"] = Json::Array(std::mem::take(&mut b.views));
+    doc["accessors"] = Json::Array(std::mem::take(&mut b.accessors));
+    glb_container(&doc, &b.bin, name)
+}
+
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+const TRIANGLES: u32 = 4;
+
+/// The binary chunk and the JSON arrays that describe it, built side by side: each accessor
+/// gets its own tightly packed bufferView, 4-byte aligned (every component here is 4 bytes).
+#[derive(Default)]
+struct GlbBuilder {
+    bin: Vec<u8>,
+    views: Vec<Json>,
+    accessors: Vec<Json>,
+}
+
+impl GlbBuilder {
+    /// Appends `values` (little-endian 4-byte words, `width` per element of glTF type `ty`) as a
+    /// bufferView and an accessor over it; returns the accessor's index. `bounds` adds the
+    /// per-component min and max (the spec requires them for POSITION and animation inputs).
+    fn accessor(
+        &mut self,
+        words: &[[u8; 4]],
+        component: u32,
+        ty: &str,
+        width: usize,
+        target: Option<u32>,
+        bounds: Option<(Vec<f32>, Vec<f32>)>,
+    ) -> usize {
+        let offset = self.bin.len();
+        self.bin.extend(words.iter().flatten());
+        let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": 4 * words.len()});
+        if let Some(t) = target {
+            view["target"] = json!(t);
+        }
+        self.views.push(view);
+        let mut acc = json!({
+            "bufferView": self.views.len() - 1,
+            "componentType": component,
+            "count": words.len() / width,
+            "type": ty,
+        });
+        if let Some((min, max)) = bounds {
+            acc["min"] = json!(min);
+            acc["max"] = json!(max);
+        }
+        self.accessors.push(acc);
+        self.accessors.len() - 1
+    }
+
+    /// VEC3 floats, with their bounds.
+    fn vec3(&mut self, v: &[Vec3], target: Option<u32>) -> usize {
+        let words: Vec<[u8; 4]> = v
+            .iter()
+            .flat_map(|p| p.to_array())
+            .map(f32::to_le_bytes)
+            .collect();
+        let (min, max) = v.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let bounds = (min.to_array().to_vec(), max.to_array().to_vec());
+        self.accessor(&words, FLOAT, "VEC3", 3, target, Some(bounds))
+    }
+
+    fn vec2(&mut self, v: &[Vec2]) -> usize {
+        let words: Vec<[u8; 4]> = v
+            .iter()
+            .flat_map(|p| p.to_array())
+            .map(f32::to_le_bytes)
+            .collect();
+        self.accessor(&words, FLOAT, "VEC2", 2, Some(ARRAY_BUFFER), None)
+    }
+
+    /// SCALAR floats (animation times and weights), with their bounds.
+    fn scalars(&mut self, v: &[f32]) -> usize {
+        let words: Vec<[u8; 4]> = v.iter().map(|x| x.to_le_bytes()).collect();
+        let min = v.iter().copied().fold(f32::INFINITY, f32::min);
+        let max = v.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        self.accessor(
+            &words,
+            FLOAT,
+            "SCALAR",
+            1,
+            None,
+            Some((vec![min], vec![max])),
+        )
+    }
+
+    fn indices(&mut self, triangles: &[[u32; 3]]) -> usize {
+        let words: Vec<[u8; 4]> = triangles
+            .iter()
+            .flatten()
+            .map(|i| i.to_le_bytes())
+            .collect();
+        self.accessor(
+            &words,
+            UNSIGNED_INT,
+            "SCALAR",
+            1,
+            Some(ELEMENT_ARRAY_BUFFER),
+            None,
+        )
+    }
+
+    /// A triangle primitive of one frame: positions, normals with `normals` (the frame must
+    /// have them), uvs when its topology has them, and `indices` (an accessor already written).
+    fn primitive(
+        &mut self,
+        f: &SequenceFrame,
+        topology: &Topology,
+        indices: usize,
+        normals: bool,
+    ) -> Json {
+        let mut attributes = json!({"POSITION": self.vec3(&f.positions, Some(ARRAY_BUFFER))});
+        if normals {
+            attributes["NORMAL"] = json!(self.vec3(&f.normals, Some(ARRAY_BUFFER)));
+        }
+        if let Some(uvs) = &topology.uvs {
+            attributes["TEXCOORD_0"] = json!(self.vec2(uvs));
+        }
+        json!({"attributes": attributes, "indices": indices, "mode": TRIANGLES})
+    }
+}
+
+/// `frame_0012` for frame 12: the names of morph targets and per-frame nodes.
+fn frame_name(frame: u32) -> String {
+    format!("frame_{frame:04}")
+}
+
+/// One frame: a node and its mesh.
+fn static_document(seq: &MeshSequence, name: &str, b: &mut GlbBuilder) -> Json {
+    let f = &seq.frames[0];
+    let topology = &seq.topologies[f.topology];
+    let indices = b.indices(&topology.triangles);
+    let primitive = b.primitive(f, topology, indices, !f.normals.is_empty());
+    json!({
+        "scene": 0,
+        "scenes": [{"name": name, "nodes": [0]}],
+        "nodes": [{"name": name, "mesh": 0}],
+        "meshes": [{"name": name, "primitives": [primitive]}],
+    })
+}
+
+/// One mesh, frame 0 its base, a morph target per frame, a STEP `weights` animation.
+fn morph_document(seq: &MeshSequence, fps: f32, name: &str, b: &mut GlbBuilder) -> Json {
+    let base = &seq.frames[0];
+    let topology = &seq.topologies[0];
+    let indices = b.indices(&topology.triangles);
+    // Normals only when every frame has them: base normals without target deltas would
+    // shade every frame like frame 0.
+    let normals = seq.frames.iter().all(|f| !f.normals.is_empty());
+    let mut primitive = b.primitive(base, topology, indices, normals);
+    primitive["targets"] = Json::Array(morph_targets(seq, normals, b));
+    let n = seq.len();
+    let one_hot = |k: usize| (0..n).map(move |j| if j == k { 1.0 } else { 0.0 });
+    let input = b.scalars(&seq.times(fps));
+    let output = b.scalars(&(0..n).flat_map(one_hot).collect::<Vec<f32>>());
+    let names: Vec<String> = seq.frames.iter().map(|f| frame_name(f.frame)).collect();
+    json!({
+        "scene": 0,
+        "scenes": [{"name": name, "nodes": [0]}],
+        "nodes": [{"name": name, "mesh": 0}],
+        "meshes": [{
+            "name": name,
+            "primitives": [primitive],
+            "weights": one_hot(0).collect::<Vec<f32>>(),
+            "extras": {"targetNames": names},
+        }],
+        "animations": [{
+            "name": name,
+            "samplers": [{"input": input, "output": output, "interpolation": "STEP"}],
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+        }],
+    })
+}
+
+/// One morph target per frame: its position deltas from frame 0, and its normal deltas with
+/// `normals`.
+fn morph_targets(seq: &MeshSequence, normals: bool, b: &mut GlbBuilder) -> Vec<Json> {
+    let base = &seq.frames[0];
+    let delta = |a: &[Vec3], b: &[Vec3]| a.iter().zip(b).map(|(p, q)| *p - *q).collect::<Vec<_>>();
+    seq.frames
+        .iter()
+        .map(|f| {
+            let moved = delta(&f.positions, &base.positions);
+            let mut target = json!({"POSITION": b.vec3(&moved, Some(ARRAY_BUFFER))});
+            if normals {
+                let turned = delta(&f.normals, &base.normals);
+                target["NORMAL"] = json!(b.vec3(&turned, Some(ARRAY_BUFFER)));
+            }
+            target
+        })
+        .collect()
+}
+
+/// A root node with one child per frame, each shown only during its frame by a STEP `scale`
+/// animation ([`visibility_sampler`]).
+fn node_per_frame_document(seq: &MeshSequence, fps: f32, name: &str, b: &mut GlbBuilder) -> Json {
+    let times = seq.times(fps);
+    let n = seq.len();
+    let mut indices_of: HashMap<usize, usize> = HashMap::new();
+    let (mut meshes, mut nodes, mut samplers, mut channels) = (vec![], vec![], vec![], vec![]);
+    nodes.push(json!({"name": name, "children": (1..=n).collect::<Vec<_>>()}));
+    for (k, f) in seq.frames.iter().enumerate() {
+        let topology = &seq.topologies[f.topology];
+        let indices = *indices_of
+            .entry(f.topology)
+            .or_insert_with(|| b.indices(&topology.triangles));
+        let primitive = b.primitive(f, topology, indices, !f.normals.is_empty());
+        meshes.push(json!({"name": frame_name(f.frame), "primitives": [primitive]}));
+        let shown = if k == 0 { 1.0 } else { 0.0 };
+        nodes.push(json!({"name": frame_name(f.frame), "mesh": k, "scale": [shown, shown, shown]}));
+        samplers.push(visibility_sampler(&times, k, b));
+        channels.push(json!({"sampler": k, "target": {"node": k + 1, "path": "scale"}}));
+    }
+    json!({
+        "scene": 0,
+        "scenes": [{"name": name, "nodes": [0]}],
+        "nodes": nodes,
+        "meshes": meshes,
+        "animations": [{"name": name, "samplers": samplers, "channels": channels}],
+    })
+}
+
+/// The STEP `scale` sampler that shows frame `k` of those at `times` during its frame only:
+/// keys 0 at the start (unless it is the first), 1 at its time, 0 at the next frame's time
+/// (unless it is the last).
+fn visibility_sampler(times: &[f32], k: usize, b: &mut GlbBuilder) -> Json {
+    let mut keys = Vec::new();
+    if k > 0 {
+        keys.push((times[0], 0.0));
+    }
+    keys.push((times[k], 1.0));
+    if let Some(&next) = times.get(k + 1) {
+        keys.push((next, 0.0));
+    }
+    let input = b.scalars(&keys.iter().map(|k| k.0).collect::<Vec<_>>());
+    let scales: Vec<Vec3> = keys.iter().map(|k| Vec3::splat(k.1)).collect();
+    let output = b.vec3(&scales, None);
+    json!({"input": input, "output": output, "interpolation": "STEP"})
+}
+
+/// The GLB container: a 12-byte header, the JSON chunk padded with spaces and the BIN chunk
+/// padded with zeros, each to 4 bytes.
+fn glb_container(doc: &Json, bin: &[u8], name: &str) -> Result<Vec<u8>> {
+    let mut json = serde_json::to_vec(doc).expect("plain data");
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let mut bin = bin.to_vec();
+    bin.resize(bin.len().next_multiple_of(4), 0);
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let total32 = u32::try_from(total).map_err(|_| {
+        Error::Invalid(format!(
+            "GLB '{name}' would be {} but a GLB holds at most 4 GiB: write fewer frames \
+             (every: k) or format Obj/Ply",
+            imprint_core::error::human_bytes(total as u64)
+        ))
+    })?;
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total32.to_le_bytes());
+    for (kind, data) in [(b"JSON", &json), (b"BIN\0", &bin)] {
+        out.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        out.extend_from_slice(kind);
+        out.extend_from_slice(data);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -333,6 +773,36 @@ mod tests {
         assert!(!header.contains("nx"));
         assert!(bytes.starts_with(header.as_bytes()));
         assert_eq!(bytes.len() - header.len(), nv * 12 + nf * 13);
+    }
+
+    #[test]
+    fn ply_round_trips_exactly_through_load_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut deformed = primitives::uv_sphere(1.3, 12, 7);
+        for p in &mut deformed.positions {
+            p.x += (p.y * 7.0).sin() / 3.0;
+        }
+        deformed.compute_normals();
+        let mut bare = primitives::cuboid(Vec3::new(1.0, 2.0, 0.5), 2);
+        bare.normals.clear();
+        for (name, m) in [
+            ("cuboid", primitives::cuboid(Vec3::new(1.0, 2.0, 0.5), 2)),
+            ("deformed", deformed),
+            ("bare", bare),
+        ] {
+            let path = dir.path().join(format!("{name}.ply"));
+            write_ply(&path, &m).unwrap();
+            let back = imprint_core::load_mesh(&path).unwrap();
+            assert_eq!(back.triangles, m.triangles, "{name}");
+            let all_bits = |v: &[Vec3]| v.iter().map(|p| bits(*p)).collect::<Vec<_>>();
+            assert_eq!(all_bits(&back.positions), all_bits(&m.positions), "{name}");
+            // Normals as written, bit for bit; a mesh written without gets computed ones.
+            let mut want = m.clone();
+            if want.normals.is_empty() {
+                want.compute_normals();
+            }
+            assert_eq!(all_bits(&back.normals), all_bits(&want.normals), "{name}");
+        }
     }
 
     #[test]

@@ -7,8 +7,10 @@ use crate::node::{
 };
 use crate::schema::defaults;
 use crate::value::{FieldData, FieldIn, FieldValue, MeshIn, Value, Values};
+use glam::Vec3;
 use imprint_core::DistanceField;
 use imprint_gpu::GpuContext;
+use imprint_stages::cloth::attach::Attachment;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
 use imprint_stages::cloth::{Body, ClothParams, ClothSim};
 use imprint_stages::drape::{DepthBody, DepthBodyState};
@@ -29,6 +31,12 @@ pub struct ClothNode {
     pub depth_colliders: Vec<DepthColliderNode>,
     /// Shape, material, pins, contact, substeps: `imprint_stages::cloth::ClothParams`.
     pub params: ClothParams,
+    /// A Mesh node the pins ride on (a cape's top edge on a skinned character's shoulders):
+    /// on the first frame each pinned particle is tied to the body's nearest surface point,
+    /// and from then on follows it, turning with the surface
+    /// (`imprint_stages::cloth::attach`). Without it pins stay where they are.
+    #[serde(default)]
+    pub pins_follow: Option<String>,
     #[serde(default)]
     pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
@@ -60,7 +68,11 @@ impl Node for ClothNode {
             .depth_colliders
             .iter()
             .map(|d| Port::new("depth_colliders", &d.body, PortType::Mesh));
-        fields.chain(bodies).collect()
+        let follow = self
+            .pins_follow
+            .iter()
+            .map(|m| Port::new("pins_follow", m, PortType::Mesh));
+        fields.chain(bodies).chain(follow).collect()
     }
     fn output(&self) -> Option<PortType> {
         Some(PortType::Mesh)
@@ -83,6 +95,13 @@ impl Node for ClothNode {
     }
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
         self.params.validate().map_err(|e| ctx.fail("params", e))?;
+        if self.pins_follow.is_some() && self.params.pins.is_empty() {
+            return Err(ctx.fail(
+                "pins_follow",
+                "the cloth has no pins to follow the body with; add pins to params (e.g. \
+                 pins: [Region(min: (..), max: (..))] around where it hangs)",
+            ));
+        }
         for d in &self.depth_colliders {
             d.params
                 .validate()
@@ -120,6 +139,8 @@ impl Node for ClothNode {
             depth.push((ctx.mesh_in(&d.body), body));
         }
         Ok(Box::new(ClothStage {
+            follow: self.pins_follow.as_ref().map(|m| ctx.mesh_in(m)),
+            attachment: None,
             colliders: self.colliders.iter().map(|c| ctx.field_in(c)).collect(),
             sim: Box::new(sim),
             previous: Vec::new(),
@@ -183,6 +204,9 @@ impl GpuPath {
 }
 
 struct ClothStage {
+    /// The body the pins ride on, and where they sit on it (tied on the first frame).
+    follow: Option<MeshIn>,
+    attachment: Option<Attachment>,
     colliders: Vec<FieldIn>,
     /// The simulation (on the GPU path, a mirror of the GPU's state once per frame).
     sim: Box<ClothSim>,
@@ -201,6 +225,7 @@ impl Stage for ClothStage {
         if ctx.first {
             self.warn_coarse_fields(ctx)?;
         }
+        self.lead_pins(ctx)?;
         let m = match &mut self.gpu {
             Some(g) => step_gpu(g, &mut self.sim, &self.colliders, ctx)?,
             None => self.step_cpu(ctx)?,
@@ -230,7 +255,7 @@ impl Stage for ClothStage {
             });
         }
         let depth: Vec<DepthBodyState> = self.depth.iter().map(|(_, d)| d.state()).collect();
-        save_state(&(&*self.sim, saved, depth))
+        save_state(&(&*self.sim, saved, depth, &self.attachment))
     }
 
     fn load(&mut self, bytes: &[u8], values: &Values) -> imprint_core::Result<()> {
@@ -238,8 +263,10 @@ impl Stage for ClothStage {
             ClothSim,
             Vec<Option<Arc<DistanceField>>>,
             Vec<DepthBodyState>,
+            Option<Attachment>,
         );
-        let (sim, saved, depth): Saved = load_state(bytes)?;
+        let (sim, saved, depth, attachment): Saved = load_state(bytes)?;
+        self.attachment = attachment;
         let mut previous = Vec::with_capacity(saved.len());
         for (f, c) in saved.into_iter().zip(&self.colliders) {
             previous.push(match f {
@@ -276,6 +303,30 @@ impl Stage for ClothStage {
 }
 
 impl ClothStage {
+    /// Sets where the pins must be at the frame's end: on the body they follow, tied to it
+    /// where they are on the first frame.
+    fn lead_pins(&mut self, ctx: &FrameCtx<'_>) -> imprint_core::Result<()> {
+        let Some(follow) = &self.follow else {
+            return Ok(());
+        };
+        let body = ctx.values.mesh(follow)?;
+        if self.attachment.is_none() {
+            let now = self.sim.positions();
+            let pins: Vec<Vec3> = self.sim.pinned().iter().map(|&i| now[i as usize]).collect();
+            self.attachment = Some(Attachment::new(body, &pins)?);
+        }
+        let targets = self
+            .attachment
+            .as_ref()
+            .expect("tied above")
+            .targets(body)?;
+        self.sim.set_pin_targets(&targets)?;
+        if let Some(g) = &mut self.gpu {
+            g.cloth.set_pin_targets(&targets)?;
+        }
+        Ok(())
+    }
+
     /// A field is exact to about a cell: where its cells are wider than ε, a part of the body
     /// thinner than a cell (a horn, a leg) can hold a particle inside while the field reads
     /// it outside. Said once, with the resolution that would resolve ε.

@@ -1,4 +1,10 @@
 //! `Mesh`: a mesh from a file or a primitive, fitted and moved; a function of time.
+//!
+//! `path` may name an OBJ, PLY (ASCII, binary little- or big-endian), STL (ASCII or binary)
+//! or glTF 2.0 file (`.gltf` with its buffers, or `.glb`). The format is told from the file's
+//! content, the extension only where the content cannot decide
+//! ([`imprint_core::mesh_formats::MeshFormat::detect`]); any other file is refused with a
+//! message saying what it looks like (an image, an archive) and what is read.
 
 use crate::node::{BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger};
 use crate::value::Value;

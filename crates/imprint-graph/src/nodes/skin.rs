@@ -1,8 +1,17 @@
 //! `Skin`: a mesh deformed by a rig (Tokoi's particle skinning with adaptive radii, or linear
 //! blend or dual quaternion skinning), with its volume and joint sections per frame.
 //!
-//! **Rest mesh.** The rig's bound OBJ, or the input Mesh node's first value: the rig's bones
-//! are in the same space, so a fitted Mesh node must be fitted where the rig's bones are.
+//! **Rig.** The project's rig RON (bones, procedural bends and keys), or a glTF 2.0 file
+//! (`.gltf`, `.glb`) with a skin: its joints are the bones, its clip (`clip: "Walk"`, played
+//! at `speed`, looping unless `loop: false`, from `clip_offset` seconds) the animation, and
+//! its own weights those of the blends (unless the method names automatic ones). Particles
+//! are tied to the joint that the nearest vertex of the rest mesh follows most under the
+//! file's weights (`ParticleSkin::bind_by_weights`); a rig RON ties them to the nearest bone
+//! segment. See `imprint_stages::skin::skeleton`.
+//!
+//! **Rest mesh.** The rig's bound mesh (a RON's `mesh:`, a glTF's own mesh at its bind
+//! pose), or the input Mesh node's first value: the rig's bones are in the same space, so a
+//! fitted Mesh node must be fitted where the rig's bones are.
 //!
 //! **Measures** (`report.json`, per frame): the posed mesh's volume over the rest volume, and
 //! each joint's section over the same at rest (`imprint_stages::skin::measure::joint_measures`).
@@ -18,6 +27,7 @@ use crate::node::{
 use crate::schema::defaults;
 use crate::value::{MeshIn, Value, Values};
 use glam::{Affine3A, Vec3};
+use imprint_core::gltf::{ClipTime, Document};
 use imprint_core::{Error, Mesh, Result};
 use imprint_gpu::GpuContext;
 use imprint_stages::skin::blend;
@@ -25,13 +35,14 @@ use imprint_stages::skin::gpu::{BlendMethod, GpuBlend};
 use imprint_stages::skin::gpu_particles::GpuParticleSkin;
 use imprint_stages::skin::measure::joint_measures;
 use imprint_stages::skin::particles::ParticleSkin;
-use imprint_stages::skin::rig::Rig;
+use imprint_stages::skin::skeleton::Skeleton;
 use imprint_stages::skin::weights::{self, Weights};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value as Json, json};
 use std::any::Any;
 use std::path::Path;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The Skin node: which mesh, which rig, which method.
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -41,14 +52,39 @@ pub struct SkinNode {
     /// out to load the OBJ the rig file binds (`mesh:` in the rig).
     #[serde(default)]
     pub mesh: Option<String>,
-    /// The rig file (RON: bones, binding, animation), relative to the pipeline file.
+    /// The rig file, relative to the pipeline file: a rig RON (bones, binding, animation) or
+    /// a glTF (`.gltf`, `.glb`) with a skin.
     pub rig: String,
+    /// A glTF rig's animation clip, by name (the error lists the file's); none holds the bind
+    /// pose. Not for a rig RON, whose animation is in the file.
+    #[serde(default)]
+    pub clip: Option<String>,
+    /// Clip seconds per pipeline second.
+    #[serde(default = "defaults::one_f32")]
+    pub speed: f32,
+    /// Whether the clip starts over at its end (else it holds its last pose).
+    #[serde(default = "defaults::yes", rename = "loop")]
+    pub looping: bool,
+    /// Clip time at the pipeline's time 0, s.
+    #[serde(default)]
+    pub clip_offset: f32,
+    /// A glTF rig's character scaled uniformly so that the longest side of its box at the
+    /// first frame is `size`, centred on `center` (`fit: (size: 1.8, center: (0, 0.9, 0))`):
+    /// for files in other units or far from the origin. A rig RON's mesh is fitted on its
+    /// Mesh node instead.
+    #[serde(default)]
+    pub fit: Option<imprint_stages::mesh::params::Fit>,
     /// `Particles(...)` (T, default parameters suit a limb of radius ~0.1 m),
     /// `Linear(...)` or `DualQuaternion(...)`.
     pub method: SkinMethod,
     /// Added to the output's positions (to stand several methods side by side), m.
     #[serde(default)]
     pub offset: (f32, f32, f32),
+    /// A velocity added to the output's positions, m/s: carries a character whose clip walks
+    /// in place (most do) across the scene. Match it to the clip's stride, or the feet
+    /// slide: a planted foot then stands still.
+    #[serde(default)]
+    pub travel: (f32, f32, f32),
     #[serde(default)]
     pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
@@ -61,16 +97,85 @@ pub struct SkinNode {
 pub enum SkinMethod {
     /// Tokoi's particle skinning: `imprint_stages::skin::particles::ParticleParams`.
     Particles(#[serde(default)] imprint_stages::skin::particles::ParticleParams),
-    /// Linear blend skinning with automatic weights.
+    /// Linear blend skinning: the rig file's weights (glTF), or automatic ones (`weights:
+    /// Distance(power: 4)`, the default for a rig RON).
     Linear {
         #[serde(default)]
-        weights: imprint_stages::skin::weights::WeightMethod,
+        weights: Option<imprint_stages::skin::weights::WeightMethod>,
     },
-    /// Dual quaternion skinning with automatic weights.
+    /// Dual quaternion skinning, weighted as `Linear`.
     DualQuaternion {
         #[serde(default)]
-        weights: imprint_stages::skin::weights::WeightMethod,
+        weights: Option<imprint_stages::skin::weights::WeightMethod>,
     },
+}
+
+impl SkinNode {
+    /// The skeleton of the rig file at `path` and the mesh the file binds, if any: a glTF
+    /// (by extension or magic bytes) with the node's clip, or a rig RON.
+    fn load(&self, path: &Path) -> crate::Result<(Skeleton, Option<Arc<Mesh>>)> {
+        if is_gltf(path) {
+            let doc = Arc::new(Document::load(path)?);
+            let time = ClipTime {
+                speed: self.speed,
+                looping: self.looping,
+                offset: self.clip_offset,
+            };
+            // Fitted as the character stands at the pipeline's first frame (the file's bind
+            // space may be far from where its clip puts it).
+            let first = match self.clip.as_deref() {
+                Some(c) => {
+                    let clip = doc.clip(c)?;
+                    doc.posed_mesh(Some(clip), time.local(clip, 0.0))
+                }
+                None => doc.mesh.clone(),
+            };
+            let mut skeleton = Skeleton::from_gltf(doc, self.clip.as_deref(), time)?;
+            if let Some(f) = &self.fit {
+                let m = first.fit_transform(f.size, f.center);
+                skeleton = skeleton.fitted(glam::Affine3A::from_mat4(m));
+            }
+            let mesh = skeleton.bound_mesh().cloned();
+            return Ok((skeleton, mesh));
+        }
+        if self.fit.is_some() {
+            return Err(Error::Invalid(format!(
+                "fit: {} is a rig RON; fit the Mesh node it skins instead (and the rig's bones \
+                 with it, in the rig file)",
+                path.display()
+            ))
+            .into());
+        }
+        if let Some(clip) = &self.clip {
+            return Err(Error::Invalid(format!(
+                "clip \"{clip}\": {} is a rig RON, whose animation is in the file; clips \
+                 are for glTF rigs",
+                path.display()
+            ))
+            .into());
+        }
+        let loaded = crate::rig::load(path)?;
+        let mesh = match &loaded.mesh {
+            Some(m) => Some(Arc::new(imprint_core::load_mesh(m)?)),
+            None => None,
+        };
+        Ok((Skeleton::from_rig(loaded.rig), mesh))
+    }
+}
+
+/// Whether `path` is a glTF file: `.gltf` / `.glb`, or the GLB magic.
+fn is_gltf(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if matches!(ext.as_deref(), Some("gltf" | "glb")) {
+        return true;
+    }
+    let mut magic = [0u8; 4];
+    std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+        .is_ok_and(|()| &magic == b"glTF")
 }
 
 impl Node for SkinNode {
@@ -106,9 +211,12 @@ impl Node for SkinNode {
         if !full.is_file() {
             return Err(ctx.fail("rig", format!("rig file not found: {}", full.display())));
         }
-        // The rig file's own errors name its file, line and column.
-        let loaded = crate::rig::load(&full)?;
-        if self.mesh.is_none() && loaded.mesh.is_none() {
+        // The rig file's own errors name its file (and for a RON, line and column).
+        let (_, bound) = self.load(&full).map_err(|e| match e {
+            crate::Error::Core(Error::Invalid(m)) => ctx.fail("rig", m),
+            e => e,
+        })?;
+        if self.mesh.is_none() && bound.is_none() {
             return Err(ctx.fail(
                 "mesh",
                 format!(
@@ -117,17 +225,33 @@ impl Node for SkinNode {
                 ),
             ));
         }
+        if !(self.speed.is_finite() && self.clip_offset.is_finite()) {
+            return Err(ctx.fail("speed", "speed and clip_offset must be finite"));
+        }
+        if let SkinMethod::Linear { weights: Some(w) }
+        | SkinMethod::DualQuaternion { weights: Some(w) } = &self.method
+        {
+            w.validate().map_err(|e| ctx.fail("method", e))?;
+        }
         let offset = Vec3::from(self.offset);
         if !offset.is_finite() {
             return Err(ctx.fail("offset", format!("offset {offset} must be finite")));
         }
-        match &self.method {
-            SkinMethod::Particles(p) => p.validate(),
-            SkinMethod::Linear { weights } | SkinMethod::DualQuaternion { weights } => {
-                weights.validate()
-            }
+        if let Some(f) = &self.fit
+            && !(f.size.is_finite() && f.size > 0.0 && f.center.is_finite())
+        {
+            return Err(ctx.fail(
+                "fit",
+                format!("fit.size must be > 0 and finite, got {}", f.size),
+            ));
         }
-        .map_err(|e| ctx.fail("method", e))?;
+        let travel = Vec3::from(self.travel);
+        if !travel.is_finite() {
+            return Err(ctx.fail("travel", format!("travel {travel} must be finite")));
+        }
+        if let SkinMethod::Particles(p) = &self.method {
+            p.validate().map_err(|e| ctx.fail("method", e))?;
+        }
         Ok(())
     }
     fn build(&self, ctx: &mut BuildCtx<'_>) -> crate::Result<Box<dyn Stage>> {
@@ -179,9 +303,10 @@ impl Stage for SkinNodeStage {
 /// A Skin node's state.
 struct SkinStage {
     name: String,
-    rig: Rig,
+    anim: Animated,
     method: SkinMethod,
     offset: Vec3,
+    travel: Vec3,
     /// The rest mesh, once known (the rig's binding at once, an input's on the first frame).
     rest: Option<Arc<Mesh>>,
     state: Option<State>,
@@ -194,6 +319,37 @@ struct SkinStage {
     /// Particles taken from a checkpoint, not yet checked against the pose they were saved
     /// with (see [`SkinStage::frame`]).
     check_loaded: bool,
+}
+
+/// The skeleton and how the method poses it.
+struct Animated {
+    skeleton: Skeleton,
+    /// Dual quaternions and particles need rigid transforms.
+    rigid: bool,
+    /// Whether dropped joint scale was reported.
+    warned: AtomicBool,
+    node: String,
+}
+
+impl Animated {
+    /// The skeleton's pose at time `t`, made rigid where the method needs it (a glTF
+    /// joint's scale is dropped then, and said once).
+    fn pose(&self, t: f32) -> imprint_stages::skin::rig::Pose {
+        if !self.rigid {
+            return self.skeleton.pose(t);
+        }
+        let (pose, dropped) = self.skeleton.rigid_pose(t);
+        if dropped > 1e-3 && !self.warned.swap(true, Ordering::Relaxed) {
+            eprintln!(
+                "warning: node '{}': the rig's joints scale by up to {:.1}% at {t:.3} s; \
+                 dual quaternions and particles follow rotation and translation only (use \
+                 method: Linear to follow scale)",
+                self.node,
+                100.0 * dropped
+            );
+        }
+        pose
+    }
 }
 
 enum State {
@@ -216,16 +372,19 @@ impl SkinStage {
         base_dir: &Path,
         gpu: Option<&'static GpuContext>,
     ) -> crate::Result<Self> {
-        let loaded = crate::rig::load(&base_dir.join(&node.rig))?;
-        let rest = match (&node.mesh, &loaded.mesh) {
-            (None, Some(path)) => Some(Arc::new(Mesh::load_obj(path)?)),
-            _ => None,
-        };
+        let (skeleton, bound) = node.load(&base_dir.join(&node.rig))?;
+        let rest = if node.mesh.is_none() { bound } else { None };
         Ok(SkinStage {
             name: name.to_string(),
-            rig: loaded.rig,
+            anim: Animated {
+                skeleton,
+                rigid: !matches!(node.method, SkinMethod::Linear { .. }),
+                warned: AtomicBool::new(false),
+                node: name.to_string(),
+            },
             method: node.method.clone(),
             offset: Vec3::from(node.offset),
+            travel: Vec3::from(node.travel),
             rest,
             state: None,
             last_skin: None,
@@ -283,11 +442,10 @@ impl SkinStage {
     /// The method's state and the rest measures, from the rest mesh.
     fn begin(&mut self, rest: &Mesh) -> Result<()> {
         self.state = Some(self.build(rest)?);
-        let identity = vec![glam::Quat::IDENTITY; self.rig.bones.len()];
         self.rest_measures = Some(joint_measures(
-            &self.rig,
+            &self.anim.skeleton,
             rest,
-            &self.rig.pose_local(&identity, Vec3::ZERO),
+            &self.anim.skeleton.rest_pose(),
         ));
         Ok(())
     }
@@ -317,7 +475,7 @@ impl SkinStage {
         if self.state.is_none() {
             self.begin(&rest)?;
         }
-        let pose = self.rig.pose(time);
+        let pose = self.anim.pose(time);
         let mut metrics = Map::new();
         let mut mesh = match self.state.as_mut().expect("built above") {
             State::Blend { weights, dual, gpu } => {
@@ -374,7 +532,7 @@ impl SkinStage {
                 // bit, and does not start from rest against a pose far from it).
                 if self.last_skin.is_none() {
                     for k in 0..frame {
-                        let p = self.rig.pose(k as f32 / fps).skin;
+                        let p = self.anim.pose(k as f32 / fps).skin;
                         let start = self.last_skin.take().unwrap_or_else(|| p.clone());
                         step(&start, &p, k, None)?;
                         self.last_skin = Some(p);
@@ -394,22 +552,23 @@ impl SkinStage {
             }
         };
         let (rest_volume, rest_sections) = self.rest_measures.as_ref().expect("built above");
-        let (volume, sections) = joint_measures(&self.rig, &mesh, &pose);
+        let (volume, sections) = joint_measures(&self.anim.skeleton, &mesh, &pose);
         metrics.insert("frame".into(), frame.into());
         metrics.insert("volume".into(), volume.into());
         metrics.insert("volume_ratio".into(), (volume / rest_volume).into());
         let mut joints = Map::new();
         for ((b, area), rest_area) in self.joints().zip(&sections).zip(rest_sections) {
             joints.insert(
-                self.rig.bones[b].name.clone(),
+                self.anim.skeleton.names[b].clone(),
                 json!({ "section": area, "section_ratio": area / rest_area }),
             );
         }
         metrics.insert("joints".into(), Json::Object(joints));
         self.last_skin = Some(pose.skin);
-        if self.offset != Vec3::ZERO {
+        let shift = self.offset + self.travel * time;
+        if shift != Vec3::ZERO {
             for p in &mut mesh.positions {
-                *p += self.offset;
+                *p += shift;
             }
         }
         Ok((mesh, Json::Object(metrics)))
@@ -434,10 +593,13 @@ impl SkinStage {
     }
 
     fn build(&self, rest: &Mesh) -> Result<State> {
-        let segments = self.rig.rest_segments();
+        let segments = &self.anim.skeleton.segments;
         Ok(match &self.method {
             SkinMethod::Linear { weights: w } | SkinMethod::DualQuaternion { weights: w } => {
-                let weights = weights::automatic(&rest.positions, &segments, w);
+                let weights = match (w, self.anim.skeleton.file_weights(rest.positions.len())?) {
+                    (None, Some(file)) => file,
+                    (w, _) => weights::automatic(&rest.positions, segments, &w.unwrap_or_default()),
+                };
                 let gpu = match self.gpu {
                     Some(ctx) => Some(Box::new(GpuBlend::new(
                         ctx,
@@ -454,14 +616,18 @@ impl SkinStage {
                 }
             }
             SkinMethod::Particles(p) => {
-                let mut sim = ParticleSkin::new(rest, &segments, p)
+                let mut sim = ParticleSkin::new(rest, segments, p)
                     .map_err(|e| match e {
                         Error::Invalid(m) => Error::Invalid(format!("node '{}': {m}", self.name)),
                         e => e,
                     })?
                     .with_name(&self.name);
+                let placing = match self.anim.skeleton.file_weights(rest.positions.len())? {
+                    Some(file) => sim.bind_by_weights(&file)?,
+                    None => sim.segment_weights(segments),
+                };
                 // The run's history starts at the rig's first pose, not necessarily its rest.
-                sim.place(&segments, &self.rig.pose(0.0).skin)?;
+                sim.place(&placing, &self.anim.pose(0.0).skin)?;
                 let gpu = match self.gpu {
                     Some(ctx) => Some(Box::new(GpuParticleSkin::new(ctx, &sim)?)),
                     None => None,
@@ -473,6 +639,6 @@ impl SkinStage {
 
     /// The bones with a parent (the joints), in file order.
     fn joints(&self) -> impl Iterator<Item = usize> + '_ {
-        (0..self.rig.bones.len()).filter(|&b| self.rig.bones[b].parent.is_some())
+        (0..self.anim.skeleton.len()).filter(|&b| self.anim.skeleton.parents[b].is_some())
     }
 }

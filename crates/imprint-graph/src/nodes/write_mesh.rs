@@ -1,9 +1,30 @@
-//! `WriteMesh`: a mesh per frame as OBJ or binary PLY, for other tools.
+//! `WriteMesh`: a mesh per frame as OBJ or binary PLY, or the whole run as one animated glTF
+//! binary (`Glb`), for other tools.
+//!
+//! **Glb.** The frames the node's schedule picks (`every`, `offset`) are kept in memory and
+//! written as `NAME.glb` once, after the last frame ([`Stage::finish`], where the Render
+//! node writes its GIF), atomically. Blender and three.js play it at the pipeline's fps:
+//! - the same triangles in every frame (any Mesh node, a skin, a cloth): one mesh, frame 0 its
+//!   base, one morph target per frame holding the position (and normal) deltas from frame 0,
+//!   and an animation of its `weights` with STEP interpolation, one key per frame at
+//!   `(frame - first frame) / fps`;
+//! - triangles that change between frames: one node per frame under a root node, each shown
+//!   only during its frame by a STEP `scale` animation (scale 0 when hidden).
+//!
+//! Cost: every kept frame's positions and normals (24 bytes per vertex) stay in memory until
+//! the end and go into each checkpoint, so a resumed run's file still holds every frame; a
+//! run interrupted before its end leaves no `.glb` (its checkpoint has the frames). Use
+//! `every: k` to keep fewer frames of a long run.
 
-use crate::node::{BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger};
+use crate::node::{
+    BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger, load_state,
+    save_state,
+};
+use crate::report::NodeReport;
 use crate::schedule::Schedule;
 use crate::schema::defaults;
-use crate::value::MeshIn;
+use crate::value::{MeshIn, Values};
+use imprint_render::mesh_io::{MeshSequence, write_glb};
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::path::PathBuf;
@@ -29,12 +50,14 @@ pub struct WriteMeshNode {
     pub enabled: bool,
 }
 
-/// File format of `WriteMesh`: OBJ (positions, normals, UVs where they exist) or binary PLY.
+/// File format of `WriteMesh`: OBJ (positions, normals, UVs where they exist) or binary PLY,
+/// a file per frame; or `Glb`, one animated glTF binary of the whole run (see the module).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
 pub enum MeshFormat {
     #[default]
     Obj,
     Ply,
+    Glb,
 }
 
 impl Node for WriteMeshNode {
@@ -64,6 +87,8 @@ impl Node for WriteMeshNode {
             input: ctx.mesh_in(&self.mesh),
             dir: ctx.out.join(self.dir.as_deref().unwrap_or(ctx.name())),
             format: self.format,
+            fps: ctx.check.fps,
+            sequence: MeshSequence::default(),
         }))
     }
     fn as_any(&self) -> &dyn Any {
@@ -75,6 +100,16 @@ struct WriteMeshStage {
     input: MeshIn,
     dir: PathBuf,
     format: MeshFormat,
+    fps: f32,
+    /// The frames kept for the `.glb` (empty for the per-frame formats).
+    sequence: MeshSequence,
+}
+
+impl WriteMeshStage {
+    /// Where the `.glb` goes: `DIR/NAME.glb`, NAME the mesh node's.
+    fn glb_path(&self) -> PathBuf {
+        self.dir.join(format!("{}.glb", self.input.node()))
+    }
 }
 
 impl Stage for WriteMeshStage {
@@ -95,9 +130,49 @@ impl Stage for WriteMeshStage {
                 imprint_render::mesh_io::write_ply(&p, mesh)?;
                 p
             }
+            MeshFormat::Glb => {
+                self.sequence
+                    .push(frame, mesh)
+                    .map_err(|e| ctx.at_node(e))?;
+                ctx.metric("glb_frames", self.sequence.len());
+                // Kept, not written yet: the file is written by `finish`.
+                return Ok(Step::wrote(0));
+            }
         };
         ctx.metric("last", path.display().to_string());
         ctx.count("files", 1);
         Ok(Step::wrote(1))
+    }
+
+    fn finish(&mut self, report: &mut NodeReport) -> imprint_core::Result<usize> {
+        // A node that kept no frame in this run's range writes no file.
+        if self.format != MeshFormat::Glb || self.sequence.is_empty() {
+            return Ok(0);
+        }
+        let path = self.glb_path();
+        write_glb(&path, &self.sequence, self.fps, self.input.node())?;
+        let layout = if self.sequence.shares_topology() {
+            "morph targets"
+        } else {
+            "node per frame"
+        };
+        let metrics = &mut report.metrics;
+        metrics.insert("glb".into(), path.display().to_string().into());
+        metrics.insert("glb_layout".into(), layout.into());
+        Ok(1)
+    }
+
+    fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {
+        match self.format {
+            MeshFormat::Glb => save_state(&self.sequence),
+            MeshFormat::Obj | MeshFormat::Ply => Ok(Vec::new()),
+        }
+    }
+
+    fn load(&mut self, bytes: &[u8], _values: &Values) -> imprint_core::Result<()> {
+        if self.format == MeshFormat::Glb {
+            self.sequence = load_state(bytes)?;
+        }
+        Ok(())
     }
 }

@@ -61,7 +61,7 @@ impl ClothAssets {
     /// Reads what `params` names, paths relative to `base_dir`.
     pub fn load(params: &ClothParams, base_dir: &Path) -> Result<Self> {
         let mesh = match &params.shape {
-            Shape::Mesh { path } => Some(Mesh::load_obj(&base_dir.join(path))?),
+            Shape::Mesh { path } => Some(imprint_core::load_mesh(&base_dir.join(path))?),
             Shape::Grid { .. } => None,
         };
         let anisotropy = match &params.material {

@@ -35,6 +35,7 @@
 //! assert_eq!(mesh.positions.len(), 64);
 //! ```
 
+pub mod attach;
 pub mod contact;
 pub mod cpu;
 pub mod gpu;

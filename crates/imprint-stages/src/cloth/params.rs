@@ -72,10 +72,11 @@ pub enum Shape {
         #[serde(default = "default_normal")]
         normal: Vec3,
     },
-    /// A garment OBJ (relative to the pipeline file's folder). Vertices at identical positions
-    /// are welded into one particle (OBJ splits them at UV seams); every unique edge becomes a
-    /// structural spring and each pair of triangles sharing an edge a shear spring between
-    /// their opposite vertices. UVs are kept for the anisotropy lookup and the output.
+    /// A garment mesh file (relative to the pipeline file's folder; OBJ, PLY, STL or glTF, as
+    /// `imprint_core::load_mesh` reads). Vertices at identical positions are welded into one
+    /// particle (OBJ splits them at UV seams); every unique edge becomes a structural spring
+    /// and each pair of triangles sharing an edge a shear spring between their opposite
+    /// vertices. UVs are kept for the anisotropy lookup and the output.
     Mesh { path: String },
 }
 

@@ -31,12 +31,12 @@ pub struct MeshSource {
 }
 
 impl MeshSource {
-    /// Validates `params`, loads the OBJ (`path` relative to `base_dir`) or builds the
-    /// primitive, and applies the fit.
+    /// Validates `params`, loads the mesh file (`path` relative to `base_dir`; any format
+    /// [`imprint_core::load_mesh`] reads) or builds the primitive, and applies the fit.
     pub fn new(params: &MeshParams, base_dir: &Path) -> Result<MeshSource> {
         params.validate()?;
         let mut rest = match (&params.path, &params.primitive) {
-            (Some(path), _) => Mesh::load_obj(&base_dir.join(path))?,
+            (Some(path), _) => imprint_core::load_mesh(&base_dir.join(path))?,
             (None, Some(prim)) => build_primitive(prim),
             (None, None) => unreachable!("validate() requires a path or a primitive"),
         };

@@ -15,7 +15,8 @@ pub const MAX_PRIMITIVE_TRIANGLES: u64 = 1 << 24;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshParams {
-    /// OBJ file, relative to the pipeline file's folder.
+    /// Mesh file, relative to the pipeline file's folder: OBJ, PLY (ASCII or binary), STL
+    /// (ASCII or binary), glTF 2.0 (`.gltf`, `.glb`); the format is read from the content.
     #[serde(
         default,
         with = "crate::bare_option",

@@ -180,19 +180,19 @@ fn segment_hits(p: DVec3, q: DVec3, t: &[DVec3; 3]) -> bool {
     (0.0..=1.0).contains(&w)
 }
 
-/// The mesh's volume and its section at each joint of `rig` (bones with a parent, in file
-/// order): the plane through the bone's head halving the angle between it and its parent.
-/// The candy-wrapper collapse of LBS under a twist shows as a section near 0, the loss at a
-/// bend as a volume below the rest volume.
+/// The mesh's volume and its section at each joint of `skeleton` (bones with a parent, in
+/// file order): the plane through the bone's head halving the angle between it and its
+/// parent. The candy-wrapper collapse of LBS under a twist shows as a section near 0, the
+/// loss at a bend as a volume below the rest volume.
 pub fn joint_measures(
-    rig: &super::rig::Rig,
+    skeleton: &super::skeleton::Skeleton,
     mesh: &Mesh,
     pose: &super::rig::Pose,
 ) -> (f64, Vec<f64>) {
-    let seg = rig.posed_segments(pose);
-    let sections = (0..rig.bones.len())
+    let seg = skeleton.posed_segments(pose);
+    let sections = (0..skeleton.len())
         .filter_map(|b| {
-            let parent = rig.index(rig.bones[b].parent.as_deref()?)?;
+            let parent = skeleton.parents[b]?;
             let dir = |(h, t): (Vec3, Vec3)| (t - h).normalize_or_zero();
             let (dp, db) = (dir(seg[parent]), dir(seg[b]));
             let normal = (dp + db).try_normalize().unwrap_or(db);

@@ -3,7 +3,9 @@
 //!
 //! - [`rig`]: bones (head, tail, parent), the rest pose, keyframed and procedural animation,
 //!   and the pose at a time (per-bone skinning transforms).
-//! - [`weights`]: automatic weights for the blends.
+//! - [`skeleton`]: a rig RON or a glTF skin and clip behind one interface: names, parents,
+//!   rest segments, the pose at a time, the file's weights.
+//! - [`weights`]: automatic weights for the blends, or a file's.
 //! - [`blend`]: LBS and DQS.
 //! - [`gpu`]: LBS and DQS as a compute dispatch, tested against [`blend`].
 //! - [`fill`]: the adaptive close-packed particle fill.
@@ -21,4 +23,5 @@ pub mod gpu_particles;
 pub mod measure;
 pub mod particles;
 pub mod rig;
+pub mod skeleton;
 pub mod weights;

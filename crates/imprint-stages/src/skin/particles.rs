@@ -346,7 +346,7 @@ impl ParticleSkin {
             volumes,
             report,
             ..
-        } = fill(rest, &params.fill)?;
+        } = fill(&*closed_for_fill(rest)?, &params.fill)?;
         let n = positions.len();
         let bone: Vec<u32> = positions
             .par_iter()
@@ -473,27 +473,29 @@ impl ParticleSkin {
     /// Puts the particles where the bones' skinning transforms `pose` carry them, at rest:
     /// the start of a run whose first pose is not the rest pose (particles left at rest would
     /// start up to a limb's length from their targets and stop the run as a blow-up on its
-    /// first frame). Placed by dual-quaternion skinning with automatic weights over the bones
-    /// `segments` (rest), smooth across the joints, where each particle's own bone alone
-    /// would tear the joint open and load its springs far past their stable strain.
-    pub fn place(&mut self, segments: &[(Vec3, Vec3)], pose: &[Affine3A]) -> Result<()> {
+    /// first frame). Placed by dual-quaternion skinning with the per-particle `weights`
+    /// ([`ParticleSkin::segment_weights`] or those [`ParticleSkin::bind_by_weights`] gives),
+    /// smooth across the joints, where each particle's own bone alone would tear the joint
+    /// open and load its springs far past their stable strain.
+    pub fn place(&mut self, weights: &super::weights::Weights, pose: &[Affine3A]) -> Result<()> {
         if pose.len() != self.bones
-            || segments.len() != self.bones
+            || weights.len() != self.rest.len()
             || pose.iter().any(|m| !m.is_finite())
         {
             return Err(Error::Invalid(format!(
-                "particle skinning: {} bones, but {} segments and a pose of {} finite transforms",
+                "particle skinning: {} bones and {} particles, but a pose of {} finite \
+                 transforms and {} weighted particles",
                 self.bones,
-                segments.len(),
-                pose.iter().filter(|m| m.is_finite()).count()
+                self.rest.len(),
+                pose.iter().filter(|m| m.is_finite()).count(),
+                weights.len()
             )));
         }
         let rot: Vec<Quat> = pose
             .iter()
             .map(|m| m.to_scale_rotation_translation().1.normalize())
             .collect();
-        let weights = super::weights::automatic(&self.rest, segments, &Default::default());
-        let placed = super::blend::dqs(&self.rest, &weights, pose);
+        let placed = super::blend::dqs(&self.rest, weights, pose);
         for (i, &x) in placed.iter().enumerate() {
             let b = self.bone[i] as usize;
             (self.xa[i], self.x[i]) = (x.into(), x);
@@ -505,6 +507,47 @@ impl ParticleSkin {
         self.ve.fill(Vec3A::ZERO);
         self.bone_rot = rot;
         Ok(())
+    }
+
+    /// Ties each particle to the bone that the nearest rest vertex follows most under
+    /// `weights` (a file's weights: the artist's binding) instead of the nearest bone
+    /// segment, which near a joint or between close limbs can pick the neighbour. The
+    /// nearest vertex is the corner of the closest surface triangle nearest the particle.
+    /// Returns each particle's weights, its nearest vertex's, to [`ParticleSkin::place`] it
+    /// with. Call before the first frame.
+    pub fn bind_by_weights(
+        &mut self,
+        weights: &super::weights::Weights,
+    ) -> Result<super::weights::Weights> {
+        if weights.len() != self.rest_mesh.positions.len() {
+            return Err(Error::Invalid(format!(
+                "particle skinning: {} weighted vertices for a mesh of {}",
+                weights.len(),
+                self.rest_mesh.positions.len()
+            )));
+        }
+        let bvh = imprint_core::bvh::Bvh::new(&self.rest_mesh);
+        let mesh = &self.rest_mesh;
+        let nearest: Vec<usize> = self
+            .rest
+            .par_iter()
+            .map(|&p| {
+                let tri = mesh.triangles[bvh.closest(p).triangle as usize];
+                let d = |v: u32| mesh.positions[v as usize].distance_squared(p);
+                tri.into_iter()
+                    .min_by(|&a, &b| d(a).total_cmp(&d(b)).then(a.cmp(&b)))
+                    .expect("three corners") as usize
+            })
+            .collect();
+        self.bone = nearest.iter().map(|&v| weights.main_bone(v)).collect();
+        let lists: Vec<Vec<(u32, f32)>> = nearest.iter().map(|&v| weights.of(v).to_vec()).collect();
+        super::weights::from_lists(&lists, self.bones)
+    }
+
+    /// Automatic weights of the particles over the bone `segments` (rest), to
+    /// [`ParticleSkin::place`] them with when the rig carries no weights.
+    pub fn segment_weights(&self, segments: &[(Vec3, Vec3)]) -> super::weights::Weights {
+        super::weights::automatic(&self.rest, segments, &Default::default())
     }
 
     /// The node name used in errors.
@@ -971,6 +1014,29 @@ fn extract_rotation(a: &Mat3A, mut q: Quat, rounds: u32) -> Quat {
         q = (step * q).normalize();
     }
     q
+}
+
+/// The rest mesh as the fill needs it: closed, so that "inside" means something. Files split
+/// vertices along UV seams and characters often have small openings (eyes, a mouth); a mesh
+/// that is not closed is welded by position and its holes are filled with fans
+/// ([`Mesh::close_holes`]). Only the fill sees the closed copy: the vertices stay the
+/// file's. A mesh still open after that is an error naming what is left.
+fn closed_for_fill(rest: &Mesh) -> Result<std::borrow::Cow<'_, Mesh>> {
+    if rest.is_closed() {
+        return Ok(std::borrow::Cow::Borrowed(rest));
+    }
+    let mut m = rest.welded();
+    m.close_holes();
+    if !m.is_closed() {
+        return Err(Error::Invalid(
+            "particle skinning: the mesh is not closed, and closing its holes did not close \
+             it (a boundary loop passes through a vertex twice, or pieces overlap): the \
+             particle fill needs an inside; close the mesh in a modeller, or use method: \
+             Linear / DualQuaternion"
+                .into(),
+        ));
+    }
+    Ok(std::borrow::Cow::Owned(m))
 }
 
 fn nearest_bone(p: Vec3, bones: &[(Vec3, Vec3)]) -> u32 {

@@ -131,6 +131,30 @@ pub fn automatic(positions: &[Vec3], segments: &[(Vec3, Vec3)], method: &WeightM
     }))
 }
 
+/// A file's weights (a glTF skin's, up to 8 per vertex): a bone listed twice counts once
+/// with the sum of its weights, the [`MAX_INFLUENCES`] largest are kept and renormalised (a
+/// vertex's lesser influences are dropped, as real-time engines do). Errors as
+/// [`from_lists`]: bones out of range, weights not finite and ≥ 0, no positive weight.
+pub fn from_influences(lists: &[Vec<(u32, f32)>], bones: usize) -> Result<Weights> {
+    let merged: Vec<Vec<(u32, f32)>> = lists
+        .iter()
+        .map(|list| {
+            let mut m: Vec<(u32, f32)> = Vec::with_capacity(list.len());
+            for &(b, w) in list {
+                match m.iter_mut().find(|e| e.0 == b) {
+                    Some(e) => e.1 += w,
+                    None => m.push((b, w)),
+                }
+            }
+            m.retain(|e| e.1 != 0.0);
+            m.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            m.truncate(MAX_INFLUENCES);
+            m
+        })
+        .collect();
+    from_lists(&merged, bones)
+}
+
 /// Explicit weights: one list of (bone, weight) per vertex, at most 4 entries, weights finite
 /// and ≥ 0 with a positive sum (normalised here), bones below `bones`.
 pub fn from_lists(lists: &[Vec<(u32, f32)>], bones: usize) -> Result<Weights> {
@@ -189,6 +213,28 @@ mod tests {
         assert!(from_lists(&[vec![(2, 1.0)]], 2).is_err());
         assert!(from_lists(&[vec![(0, 0.0)]], 2).is_err());
         assert!(from_lists(&[vec![(0, 1.0); 5]], 8).is_err());
+    }
+
+    /// A file's lists: a bone listed twice counts once with the sum, the 4 largest of 6 are
+    /// kept and renormalised, zero weights go; out-of-range bones are still refused.
+    #[test]
+    fn file_influences_merge_keep_four_and_renormalise() {
+        let w = from_influences(
+            &[
+                vec![(3, 0.25), (1, 0.25), (3, 0.25), (0, 0.25)],
+                vec![(0, 0.3), (1, 0.2), (2, 0.2), (3, 0.1), (4, 0.1), (5, 0.1)],
+                vec![(0, 0.0), (2, 2.0)],
+            ],
+            6,
+        )
+        .unwrap();
+        assert_eq!(w.of(0), &[(3, 0.5), (0, 0.25), (1, 0.25)]);
+        let kept: Vec<u32> = w.of(1).iter().map(|e| e.0).collect();
+        assert_eq!(kept, [0, 1, 2, 3]);
+        let sum: f32 = w.of(1).iter().map(|e| e.1).sum();
+        assert!((sum - 1.0).abs() < 1e-6 && (w.of(1)[0].1 - 0.375).abs() < 1e-6);
+        assert_eq!(w.of(2), &[(2, 1.0)]);
+        assert!(from_influences(&[vec![(6, 1.0)]], 6).is_err());
     }
 
     #[test]
