@@ -173,3 +173,127 @@ fn a_character_from_another_exporter_moves_and_presses_prints() {
     assert!(swing > 0.05, "the clip moves it: top varies by {swing} m");
     assert!(lowest < 0.1 - 0.01, "it pressed the sand: lowest {lowest}");
 }
+
+/// The issue's acceptance test: a walk clip whose feet press prints where the feet were.
+/// tests/data/walker.gltf (written by `make_walker.py` beside it) is a body box on two
+/// inverted-pyramid feet whose clip "Walk" carries the root along +z at 0.5 m/s while the
+/// feet take turns: planted 3 cm deep and still, lifted straight up, swung 0.5 m forward
+/// 8 cm up, set straight down. Stood on 10 cm of snow, each planted foot's lowest vertex lies
+/// within one cell of its print's deepest cell, that cell is as deep as the foot went, and
+/// the snow farther than 10 cm from every planted foot is untouched.
+#[test]
+fn a_walk_presses_prints_where_the_feet_were() {
+    use glam::Vec3Swizzles;
+    use imprint_graph::diagnostics::Source;
+    use imprint_graph::exec::RunOptions;
+    use imprint_graph::value::Value;
+    use imprint_graph::{Executor, parse};
+    const SURFACE: f32 = 0.1;
+    // 1 cm cells with centres on whole centimetres, where the fixture plants its feet.
+    let text = format!(
+        r#"Pipeline(frames: 48, fps: 24, backend: Cpu, nodes: {{
+            "walker": Skin(rig: "{}/data/walker.gltf", clip: "Walk", method: Linear(),
+                           offset: (0, {SURFACE}, 0)),
+            "snow": Ground(objects: ["walker"], params: (size: (0.61, 1.61),
+                           resolution: (61, 161), origin: (-0.3, -0.3),
+                           initial: Flat({SURFACE}), material: Preset(Snow))),
+            "h": WriteHeightmap(heights: "snow", formats: [Npy], every: 100000),
+        }})"#,
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let source = Source {
+        name: "walk.ron".into(),
+        text,
+    };
+    let plan = parse(source, Path::new(".")).unwrap();
+    let out = std::env::temp_dir().join(format!("imprint-walk-{}", std::process::id()));
+    let opts = RunOptions {
+        out: out.clone(),
+        ..Default::default()
+    };
+    let mut ex = Executor::new(&plan, opts).unwrap();
+    let mut feet: Vec<Vec<usize>> = Vec::new(); // vertices of the x < 0 foot, then x > 0
+    let mut last = [None::<Vec3>; 2]; // each foot's lowest vertex at the last frame
+    let mut plant = [None::<(u32, Vec3)>; 2]; // (first frame, lowest vertex) while planted
+    let mut spots = Vec::new(); // every planted lowest vertex
+    let mut checked = 0;
+    let mut ground = None;
+    for frame in 0..48 {
+        ex.step().unwrap();
+        let Some(Value::Mesh(m)) = ex.value("walker") else {
+            panic!("no mesh")
+        };
+        let Some(Value::Heights(h)) = ex.value("snow") else {
+            panic!("no heights")
+        };
+        if feet.is_empty() {
+            let foot = |left: bool| {
+                (0..m.positions.len())
+                    .filter(|&v| {
+                        let p = m.positions[v];
+                        p.y < SURFACE + 0.2 && (p.x < 0.0) == left
+                    })
+                    .collect::<Vec<_>>()
+            };
+            feet = vec![foot(true), foot(false)];
+        }
+        for (f, verts) in feet.iter().enumerate() {
+            let low = verts
+                .iter()
+                .map(|&v| m.positions[v])
+                .min_by(|a, b| a.y.total_cmp(&b.y))
+                .unwrap();
+            let still = last[f].is_none_or(|q| q.xz().distance(low.xz()) < 1e-3);
+            last[f] = Some(low);
+            if low.y < SURFACE && still {
+                plant[f].get_or_insert((frame, low));
+                spots.push(low);
+                continue;
+            }
+            let Some((from, at)) = plant[f].take() else {
+                continue;
+            };
+            // The plant has ended (the foot lifted): its print, around where it stood.
+            let cell = |x: f32, o: f32| ((x - o) / h.cell).round() as i64;
+            let (ia, ka) = (cell(at.x, h.origin.x), cell(at.z, h.origin.y));
+            let reach = (0.05 / h.cell).ceil() as i64;
+            let mut deepest = (0, 0, f32::INFINITY);
+            for k in ka - reach..=ka + reach {
+                for i in ia - reach..=ia + reach {
+                    if h.position(i as u32, k as u32).xz().distance(at.xz()) <= 0.05 {
+                        let y = h.heights[h.index(i as u32, k as u32)];
+                        if y < deepest.2 {
+                            deepest = (i - ia, k - ka, y);
+                        }
+                    }
+                }
+            }
+            let (di, dk, y) = deepest;
+            println!(
+                "{} foot planted frames {from}..{frame}: lowest vertex {at} over cell \
+                 ({ia}, {ka}); deepest cell within 5 cm {y} m at ({di:+}, {dk:+}) from it, \
+                 {:+.1e} m from the foot",
+                ["right (x < 0)", "left (x > 0)"][f],
+                y - at.y
+            );
+            assert!(di.abs() <= 1 && dk.abs() <= 1, "print off the foot");
+            assert!((y - at.y).abs() <= 1e-4, "print depth {y} vs foot {}", at.y);
+            checked += 1;
+        }
+        ground = Some(h);
+    }
+    std::fs::remove_dir_all(&out).ok();
+    assert!(checked >= 4, "{checked} plants checked");
+    let h = ground.unwrap();
+    let mut pressed = 0;
+    for k in 0..h.dims.y {
+        for i in 0..h.dims.x {
+            let p = h.position(i, k);
+            let untouched = (p.y - SURFACE).abs() < 1e-6;
+            pressed += usize::from(!untouched);
+            let near = spots.iter().any(|s| s.xz().distance(p.xz()) <= 0.1);
+            assert!(near || untouched, "a print where no foot stood: {p}");
+        }
+    }
+    println!("{checked} plants, {pressed} cells pressed");
+}

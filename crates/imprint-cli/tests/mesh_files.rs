@@ -187,3 +187,69 @@ fn a_mesh_node_reads_stl_and_ply_and_refuses_an_image() {
     );
     assert!(err.contains(imprint_core::mesh_formats::SUPPORTED), "{err}");
 }
+
+/// A Skin node over the hand-made two-joint glTF (tests/data/two_joint.gltf), edited by
+/// `edit` into a bad file: the run stops before any frame with exit code 2, a message that
+/// names the file and says `what`, and no output folder.
+fn bad_rig(name: &str, edit: impl FnOnce(&mut serde_json::Value), clip: &str, what: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/two_joint.gltf");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(src).unwrap()).unwrap();
+    edit(&mut json);
+    std::fs::write(dir.path().join(name), json.to_string()).unwrap();
+    let text = format!(
+        "Pipeline(frames: 2, backend: Cpu, nodes: {{\n\
+         \"s\": Skin(rig: \"{name}\", clip: \"{clip}\", method: Linear()),\n\
+         \"objs\": WriteMesh(mesh: \"s\"),\n}})\n"
+    );
+    std::fs::write(dir.path().join("p.ron"), text).unwrap();
+    let out = imprint(&["run", "p.ron", "--out", "o"], dir.path());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{name}: {err}");
+    assert!(
+        err.contains(name),
+        "{name}: the message names the file: {err}"
+    );
+    for w in what {
+        assert!(err.contains(w), "{name}: the message says {w:?}: {err}");
+    }
+    assert!(!dir.path().join("o").exists(), "{name}: nothing written");
+}
+
+#[test]
+fn bad_gltf_rigs_stop_with_the_file_and_the_fault() {
+    bad_rig("unknown_clip.gltf", |_| {}, "Run", &["Run", "Bend"]);
+    bad_rig(
+        "no_skin.gltf",
+        |j| {
+            j.as_object_mut().unwrap().remove("skins");
+            j["nodes"][0].as_object_mut().unwrap().remove("skin");
+            let attrs = j["meshes"][0]["primitives"][0]["attributes"]
+                .as_object_mut()
+                .unwrap();
+            attrs.remove("JOINTS_0");
+            attrs.remove("WEIGHTS_0");
+        },
+        "Bend",
+        &["no skin"],
+    );
+    bad_rig(
+        "missing_bin.gltf",
+        |j| j["buffers"][0]["uri"] = "limb.bin".into(),
+        "Bend",
+        &["limb.bin"],
+    );
+    bad_rig(
+        "draco.gltf",
+        |j| j["extensionsRequired"] = serde_json::json!(["KHR_draco_mesh_compression"]),
+        "Bend",
+        &["KHR_draco_mesh_compression"],
+    );
+    bad_rig(
+        "joint_out_of_range.gltf",
+        |j| j["skins"][0]["joints"] = serde_json::json!([1]),
+        "Bend",
+        &["joint"],
+    );
+}

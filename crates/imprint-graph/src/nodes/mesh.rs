@@ -4,7 +4,11 @@
 //! or glTF 2.0 file (`.gltf` with its buffers, or `.glb`). The format is told from the file's
 //! content, the extension only where the content cannot decide
 //! ([`imprint_core::mesh_formats::MeshFormat::detect`]); any other file is refused with a
-//! message saying what it looks like (an image, an archive) and what is read.
+//! message saying what it looks like (an image, an archive) and what is read. A glTF's
+//! meshes come at their bind pose, or posed by one of its clips at each frame's time
+//! (`clip: "Walk"`, with `speed`, `loop`, `clip_offset` as on the Skin node: linear blend
+//! with the file's weights); a character that should deform by particles or dual
+//! quaternions goes through a Skin node instead.
 
 use crate::node::{BuildCtx, CheckCtx, FrameCtx, Node, Port, PortType, Stage, Step, Trigger};
 use crate::value::Value;

@@ -213,7 +213,7 @@ impl Node for SkinNode {
         }
         // The rig file's own errors name its file (and for a RON, line and column).
         let (_, bound) = self.load(&full).map_err(|e| match e {
-            crate::Error::Core(Error::Invalid(m)) => ctx.fail("rig", m),
+            crate::Error::Core(e) => ctx.fail("rig", e),
             e => e,
         })?;
         if self.mesh.is_none() && bound.is_none() {

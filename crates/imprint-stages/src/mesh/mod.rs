@@ -11,6 +11,7 @@ pub mod params;
 pub use params::{Axis, Fit, MeshParams, Motion, Primitive, RigidKey, Rotation, RotationAxis};
 
 use glam::Vec3;
+use imprint_core::gltf::{ClipTime, Document};
 use imprint_core::mesh::primitives;
 use imprint_core::{Aabb, Mesh, Result};
 use motion::{Compiled, Deform};
@@ -28,6 +29,53 @@ pub struct MeshSource {
     rest_bounds: Aabb,
     motions: Vec<Compiled>,
     is_static: bool,
+    /// A glTF clip posing the rest mesh before the motions, and the fit applied after it.
+    clip: Option<Posed>,
+}
+
+/// A glTF document's skinned mesh posed by one of its clips (`MeshParams::clip`).
+#[derive(Clone, Debug)]
+struct Posed {
+    doc: std::sync::Arc<Document>,
+    clip: usize,
+    time: ClipTime,
+    fit: glam::Mat4,
+}
+
+impl Posed {
+    /// Loads `path`, finds the clip, and fits the mesh as it stands at time 0.
+    fn new(params: &MeshParams, path: &Path, name: &str) -> Result<Self> {
+        let doc = Document::load(path)?;
+        let clip = doc.clip(name)?;
+        let index = doc
+            .clips
+            .iter()
+            .position(|c| std::ptr::eq(c, clip))
+            .expect("found above");
+        let time = ClipTime {
+            speed: params.speed,
+            looping: params.looping,
+            offset: params.clip_offset,
+        };
+        let first = doc.posed_mesh(Some(clip), time.local(clip, 0.0));
+        let fit = params.fit.map_or(glam::Mat4::IDENTITY, |f| {
+            first.fit_transform(f.size, f.center)
+        });
+        Ok(Posed {
+            doc: std::sync::Arc::new(doc),
+            clip: index,
+            time,
+            fit,
+        })
+    }
+
+    /// The posed, fitted mesh at the pipeline's `time`.
+    fn at(&self, time: f32) -> Mesh {
+        let clip = &self.doc.clips[self.clip];
+        let mut m = self.doc.posed_mesh(Some(clip), self.time.local(clip, time));
+        m.transform(self.fit);
+        m
+    }
 }
 
 impl MeshSource {
@@ -35,6 +83,10 @@ impl MeshSource {
     /// [`imprint_core::load_mesh`] reads) or builds the primitive, and applies the fit.
     pub fn new(params: &MeshParams, base_dir: &Path) -> Result<MeshSource> {
         params.validate()?;
+        if let (Some(path), Some(clip)) = (&params.path, &params.clip) {
+            let posed = Posed::new(params, &base_dir.join(path), clip)?;
+            return Ok(Self::with_rest(posed.at(0.0), params, Some(posed)));
+        }
         let mut rest = match (&params.path, &params.primitive) {
             (Some(path), _) => imprint_core::load_mesh(&base_dir.join(path))?,
             (None, Some(prim)) => build_primitive(prim),
@@ -47,19 +99,25 @@ impl MeshSource {
             let m = rest.fit_transform(fit.size, fit.center);
             rest.transform(m);
         }
+        Ok(Self::with_rest(rest, params, None))
+    }
+
+    /// The source for a fitted rest mesh: its motions compiled against its box.
+    fn with_rest(rest: Mesh, params: &MeshParams, clip: Option<Posed>) -> Self {
         let rest_bounds = rest.bounds();
         let motions = params
             .motion
             .iter()
             .map(|m| Compiled::new(m, &rest_bounds))
             .collect();
-        let is_static = params.motion.iter().all(Motion::is_time_invariant);
-        Ok(MeshSource {
+        let is_static = clip.is_none() && params.motion.iter().all(Motion::is_time_invariant);
+        MeshSource {
             rest,
             rest_bounds,
             motions,
             is_static,
-        })
+            clip,
+        }
     }
 
     /// The fitted mesh before any motion.
@@ -89,11 +147,14 @@ impl MeshSource {
     pub fn at_into(&self, time: f32, out: &mut Mesh) {
         debug_assert!(time.is_finite(), "mesh time must be finite, got {time}");
         if self.motions.is_empty() {
-            out.clone_from(&self.rest);
+            match &self.clip {
+                Some(c) => *out = c.at(time),
+                None => out.clone_from(&self.rest),
+            }
             return;
         }
         let deforms: Vec<Deform> = self.motions.iter().map(|m| m.at(time)).collect();
-        self.deform_positions(&deforms, &mut out.positions);
+        self.deform_positions(time, &deforms, &mut out.positions);
         out.triangles.clone_from(&self.rest.triangles);
         out.uvs.clone_from(&self.rest.uvs);
         self.compute_normals(&out.positions, &mut out.normals);
@@ -104,13 +165,13 @@ impl MeshSource {
     pub fn positions_at_into(&self, time: f32, out: &mut Vec<Vec3>) {
         debug_assert!(time.is_finite(), "mesh time must be finite, got {time}");
         let deforms: Vec<Deform> = self.motions.iter().map(|m| m.at(time)).collect();
-        self.deform_positions(&deforms, out);
+        self.deform_positions(time, &deforms, out);
     }
 
     /// Bounding box of the mesh over the given times (sampled: a grid meant to hold a
     /// moving mesh should sample densely or add a margin). The rest box when no time is given.
     pub fn sampled_bounds(&self, times: impl IntoIterator<Item = f32>) -> Aabb {
-        if self.motions.is_empty() {
+        if self.motions.is_empty() && self.clip.is_none() {
             return self.rest_bounds;
         }
         let mut b = Aabb::empty();
@@ -122,10 +183,16 @@ impl MeshSource {
         if b.is_empty() { self.rest_bounds } else { b }
     }
 
-    fn deform_positions(&self, deforms: &[Deform], out: &mut Vec<Vec3>) {
-        out.resize(self.rest.positions.len(), Vec3::ZERO);
+    /// The motions applied to the rest positions (to the clip's pose at `time`, when the
+    /// mesh has a clip).
+    fn deform_positions(&self, time: f32, deforms: &[Deform], out: &mut Vec<Vec3>) {
+        let posed = self.clip.as_ref().map(|c| c.at(time));
+        let base = posed
+            .as_ref()
+            .map_or(&self.rest.positions, |m| &m.positions);
+        out.resize(base.len(), Vec3::ZERO);
         out.par_chunks_mut(CHUNK)
-            .zip(self.rest.positions.par_chunks(CHUNK))
+            .zip(base.par_chunks(CHUNK))
             .for_each(|(out, rest)| {
                 out.copy_from_slice(rest);
                 for d in deforms {
@@ -210,6 +277,40 @@ mod tests {
 
     fn source(text: &str) -> MeshSource {
         MeshSource::new(&params(text), &workspace_root()).unwrap()
+    }
+
+    /// A glTF file's clip poses the mesh per frame: the hand-made two-joint file
+    /// (tests/data/two_joint.gltf; its clip "Bend" turns the child 90° about z through
+    /// (0, 1, 0) over one second) puts the child's vertex (0, 2, 0) at (−1, 1, 0) at 1 s and
+    /// the half-and-half vertex (0.5, 1, 0) at the blend (0.25, 1.25, 0); without `loop` it
+    /// holds there; a fit scales the pose at time 0; unknown clips list the file's.
+    #[test]
+    fn a_gltf_clip_poses_the_mesh() {
+        let src = source(r#"(path: "tests/data/two_joint.gltf", clip: "Bend", loop: false)"#);
+        assert!(!src.is_static());
+        let near = |m: &Mesh, p: Vec3| m.positions.iter().any(|q| q.distance(p) < 1e-5);
+        for t in [1.0, 3.0] {
+            let m = src.at(t);
+            assert!(
+                near(&m, Vec3::new(-1.0, 1.0, 0.0)),
+                "{t}: {:?}",
+                m.positions
+            );
+            assert!(
+                near(&m, Vec3::new(0.25, 1.25, 0.0)),
+                "{t}: {:?}",
+                m.positions
+            );
+        }
+        assert!(near(&src.at(0.0), Vec3::new(0.0, 2.0, 0.0)));
+        let fitted = source(r#"(path: "tests/data/two_joint.gltf", clip: "Bend", fit: (size: 4))"#);
+        assert!((fitted.rest_bounds().size().max_element() - 4.0).abs() < 1e-5);
+        let err = MeshSource::new(
+            &params(r#"(path: "tests/data/two_joint.gltf", clip: "Run")"#),
+            &workspace_root(),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("Bend"), "{err}");
     }
 
     #[test]
@@ -440,8 +541,9 @@ mod tests {
                 let frames = 300;
                 let (positions, normals, total) = pool.install(|| {
                     let deforms: Vec<Deform> = s.motions.iter().map(|m| m.at(0.5)).collect();
-                    let positions =
-                        best(frames, |_| s.deform_positions(&deforms, &mut out.positions));
+                    let positions = best(frames, |_| {
+                        s.deform_positions(0.0, &deforms, &mut out.positions)
+                    });
                     let positions_now = out.positions.clone();
                     let normals = best(frames, |_| {
                         s.compute_normals(&positions_now, &mut out.normals)

@@ -37,6 +37,23 @@ pub struct MeshParams {
         skip_serializing_if = "Option::is_none"
     )]
     pub fit: Option<Fit>,
+    /// A glTF file's animation clip, by name (the error lists the file's): the mesh is then
+    /// the file's skinned mesh posed by the clip at each frame's time (linear blend with the
+    /// file's weights), fitted as it stands at time 0, before any `motion`. The same fields
+    /// as the Skin node's: `speed` (clip seconds per pipeline second), `loop`,
+    /// `clip_offset` (clip time at the pipeline's time 0).
+    #[serde(
+        default,
+        with = "crate::bare_option",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub clip: Option<String>,
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub speed: f32,
+    #[serde(default = "yes", rename = "loop", skip_serializing_if = "is_true")]
+    pub looping: bool,
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub clip_offset: f32,
     /// Fill the mesh's holes (fans around each boundary loop's centroid), so that an open
     /// scan such as the Stanford bunny has an inside: its distance field is then signed.
     #[serde(default, skip_serializing_if = "is_false")]
@@ -51,6 +68,14 @@ pub struct MeshParams {
 
 fn yes() -> bool {
     true
+}
+
+fn is_one(x: &f32) -> bool {
+    *x == 1.0
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 fn is_true(b: &bool) -> bool {
@@ -429,6 +454,17 @@ impl MeshParams {
         if let Some(fit) = &self.fit {
             positive("fit.size", fit.size)?;
             finite_vec("fit.center", fit.center)?;
+        }
+        if self.clip.is_some() && self.path.is_none() {
+            return Err(Error::Invalid(
+                "clip: only a glTF file (`path`) has clips, not a primitive".into(),
+            ));
+        }
+        if !(self.speed.is_finite() && self.clip_offset.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "speed {} and clip_offset {} must be finite",
+                self.speed, self.clip_offset
+            )));
         }
         for (i, m) in self.motion.iter().enumerate() {
             validate_motion(&format!("motion[{i}] {}", m.name()), m)?;
