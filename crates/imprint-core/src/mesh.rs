@@ -49,6 +49,17 @@ impl Mesh {
         }
     }
 
+    /// The signed volume enclosed (divergence theorem, in f64): positive when a closed mesh
+    /// is wound outward; for an open one, the volume of the cone it spans from the origin.
+    pub fn signed_volume(&self) -> f64 {
+        (0..self.triangles.len())
+            .map(|t| {
+                let [a, b, c] = self.triangle(t).map(Vec3::as_dvec3);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
     /// The mesh with vertices at the same position merged (exact bit patterns; the first
     /// index wins), normals recomputed and texture coordinates dropped: files split vertices
     /// along UV seams, which leaves an otherwise closed surface with "holes" by index that
@@ -547,15 +558,6 @@ pub mod primitives {
 mod tests {
     use super::*;
 
-    fn signed_volume(m: &Mesh) -> f64 {
-        (0..m.triangles.len())
-            .map(|t| {
-                let [a, b, c] = m.triangle(t);
-                a.dot(b.cross(c)) as f64 / 6.0
-            })
-            .sum()
-    }
-
     /// A sphere with both polar caps cut off is open; closing its two holes gives a closed,
     /// outward mesh whose volume is the sphere's less what the flat lids cut.
     #[test]
@@ -572,8 +574,8 @@ mod tests {
         assert!(!cut.is_closed());
         assert_eq!(cut.close_holes(), 2);
         assert!(cut.is_closed());
-        let full = signed_volume(&s);
-        let v = signed_volume(&cut);
+        let full = s.signed_volume();
+        let v = cut.signed_volume();
         assert!(v > 0.97 * full && v < full, "{v} vs {full}");
         // Nothing left to close.
         assert_eq!(cut.close_holes(), 0);
@@ -633,14 +635,7 @@ mod tests {
     #[test]
     fn primitives_are_closed_and_outward() {
         // Closed, outward meshes have positive signed volume close to the analytic one.
-        fn volume(m: &Mesh) -> f64 {
-            (0..m.triangles.len())
-                .map(|t| {
-                    let [a, b, c] = m.triangle(t);
-                    a.dot(b.cross(c)) as f64 / 6.0
-                })
-                .sum()
-        }
+        let volume = Mesh::signed_volume;
         let s = primitives::uv_sphere(1.0, 64, 32);
         let v = volume(&s);
         assert!((v - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.03, "{v}");

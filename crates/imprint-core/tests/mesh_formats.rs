@@ -37,15 +37,6 @@ fn triangles() -> Vec<[[f32; 3]; 3]> {
         .collect()
 }
 
-fn signed_volume(m: &Mesh) -> f64 {
-    (0..m.triangles.len())
-        .map(|t| {
-            let [a, b, c] = m.triangle(t);
-            a.dot(b.cross(c)) as f64 / 6.0
-        })
-        .sum()
-}
-
 /// What every reading of the box must give.
 fn assert_is_the_box(m: &Mesh, what: &str) {
     assert_eq!(m.positions.len(), 8, "{what}: vertices");
@@ -54,7 +45,7 @@ fn assert_is_the_box(m: &Mesh, what: &str) {
     assert_eq!(b.min, Vec3::from(LO), "{what}: min");
     assert_eq!(b.max, Vec3::from(HI), "{what}: max");
     assert!(m.is_closed(), "{what}: welded and closed");
-    let v = signed_volume(m);
+    let v = m.signed_volume();
     assert!(
         (v - VOLUME).abs() < 1e-9,
         "{what}: volume {v}, want {VOLUME}"

@@ -26,14 +26,9 @@ use glam::{DVec3, IVec3, Vec3};
 use imprint_core::Mesh;
 use std::collections::HashMap;
 
-/// Signed volume of a closed mesh (positive when wound outward).
+/// Signed volume of a closed mesh (positive when wound outward): [`Mesh::signed_volume`].
 pub fn volume(mesh: &Mesh) -> f64 {
-    (0..mesh.triangles.len())
-        .map(|t| {
-            let [a, b, c] = mesh.triangle(t).map(Vec3::as_dvec3);
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
+    mesh.signed_volume()
 }
 
 /// Area of the section of a closed, outward mesh by the plane through `point` with normal
