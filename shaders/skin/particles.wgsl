@@ -243,7 +243,8 @@ fn rotate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     }
     var jac = 1.0;
     if pi.bone.z == 1u {
-        jac = determinant(a) / bitcast<f32>(pi.bone.y);
+        // Bounded as on the CPU (JAC_RANGE in skin/particles.rs).
+        jac = clamp(determinant(a) / bitcast<f32>(pi.bone.y), 0.0, 2.0);
     }
     ro.hx.w = jac;
     rot[i] = ro;

@@ -639,9 +639,11 @@ impl ParticleSkin {
                                 out[k] = extract_rotation(&a, rot[i], 1);
                                 hr[k] = Mat3A::from_quat(out[k]) * 0.5;
                             }
-                            // det(A B⁻¹) as det A / det B: exactly 1 at rest.
+                            // det(A B⁻¹) as det A / det B: exactly 1 at rest; bounded
+                            // (JAC_RANGE), as a neighbourhood nearly flat at rest gives
+                            // wild ratios from small moves.
                             jac[k] = match binv[i] {
-                                Some(b) => a.determinant() / b,
+                                Some(b) => (a.determinant() / b).clamp(JAC_RANGE.0, JAC_RANGE.1),
                                 None => 1.0,
                             };
                         }
@@ -984,6 +986,14 @@ impl ParticleSkin {
         )
     }
 }
+
+/// The range the pressure's volume change J is held to: a neighbourhood nearly flat at rest
+/// (a thin part one or two particles thick: ears, a tail) has a tiny rest determinant, so a
+/// small move gives a J of ±100 and a pressure force that threw Wuson's particles metres
+/// in three substeps. Between 0 (collapsed or inverted: the most pressure) and 2 the force
+/// is as before; beyond, it stays bounded. The GPU kernel clamps alike
+/// (shaders/skin/particles.wgsl).
+pub(crate) const JAC_RANGE: (f32, f32) = (0.0, 2.0);
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
 /// into current ones.
