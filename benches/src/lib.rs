@@ -211,15 +211,10 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
     };
     let _ = writeln!(
         s,
-        "Adapter: {}{}. Grid {res}³ fitted as in table 1, a = 3, Closest; times are wall clock \
+        "Adapter: {}. Grid {res}³ fitted as in table 1, a = 3, Closest; times are wall clock \
          from submit to completion (median of {repeat}), read-back excluded; error of the read-back \
          field against the exact distance.\n",
-        ctx.adapter_name(),
-        if ctx.is_software() {
-            " (software Vulkan: correct, not fast; not a GPU figure)"
-        } else {
-            ""
-        }
+        adapter_label(ctx),
     );
     let _ = writeln!(
         s,
@@ -293,4 +288,14 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
         );
     }
     s
+}
+
+/// The adapter's name, marked when it is a software one (its times are no GPU figure).
+pub fn adapter_label(ctx: &imprint_gpu::GpuContext) -> String {
+    let software = if ctx.is_software() {
+        " (software Vulkan: correct, not fast; not a GPU figure)"
+    } else {
+        ""
+    };
+    format!("{}{software}", ctx.adapter_name())
 }

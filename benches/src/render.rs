@@ -69,17 +69,7 @@ pub fn section(root: &Path, repeat: usize) -> String {
         camera: cam,
     };
     let gpu = imprint_gpu::GpuContext::shared().ok();
-    let adapter = gpu.map_or("none".to_string(), |g| {
-        format!(
-            "{}{}",
-            g.adapter_name(),
-            if g.is_software() {
-                " (software Vulkan: correct, not fast; not a GPU figure)"
-            } else {
-                ""
-            }
-        )
-    });
+    let adapter = gpu.map_or("none".to_string(), crate::adapter_label);
 
     // Frames.
     let _ = writeln!(

@@ -13,7 +13,7 @@
 //! Both paths are stepped in turn, frame by frame, so they see the same frames; a frame's
 //! GPU time is the wall clock around the stage's call, which submits and waits for the GPU.
 
-use crate::{median, median_ms};
+use crate::{adapter_label, median, median_ms};
 use glam::{Mat4, UVec2, Vec2, Vec3};
 use imprint_core::mesh::primitives::{cylinder, uv_sphere};
 use imprint_core::{HeightField, Mesh, Result};
@@ -98,19 +98,6 @@ fn max_abs(a: &[f32], b: &[f32]) -> f32 {
         .zip(b)
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f32::max)
-}
-
-/// The adapter's name, marked when it is a software one (its times are no GPU figure).
-fn adapter_label(ctx: &GpuContext) -> String {
-    format!(
-        "{}{}",
-        ctx.adapter_name(),
-        if ctx.is_software() {
-            " (software Vulkan: correct, not fast; not a GPU figure)"
-        } else {
-            ""
-        }
-    )
 }
 
 /// The section's markdown: one line and no table where no adapter exists (a CPU-only

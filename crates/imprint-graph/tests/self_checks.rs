@@ -333,13 +333,9 @@ fn boxed_in(dir: &Path) -> PathBuf {
     path
 }
 
-/// Garment vertices left inside the body (no view resolves them, no fallback): counted per
-/// frame and in all, warned once over a run that drapes every frame.
-#[test]
-fn drape_vertices_left_inside_are_counted_and_warned_once() {
-    let dir = tempfile::tempdir().unwrap();
-    let body = boxed_in(dir.path());
-    let p = plan(
+/// A small sphere garment moving inside the boxed-in body, draped every frame for 4 frames.
+fn boxed_in_drape(body: &Path) -> Plan {
+    plan(
         4,
         &format!(
             r#""body": Mesh(path: {:?}),
@@ -349,7 +345,16 @@ fn drape_vertices_left_inside_are_counted_and_warned_once() {
                "out": WriteMesh(mesh: "fit", every: 1),"#,
             body.display().to_string()
         ),
-    );
+    )
+}
+
+/// Garment vertices left inside the body (no view resolves them, no fallback): counted per
+/// frame and in all, warned once over a run that drapes every frame.
+#[test]
+fn drape_vertices_left_inside_are_counted_and_warned_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = boxed_in(dir.path());
+    let p = boxed_in_drape(&body);
     let r = run(&p, &opts(&dir.path().join("run"), 0..4), &mut |_, _| {}).unwrap();
     let inside: Vec<u64> = per_frame(&r, "fit")
         .iter()
@@ -373,17 +378,7 @@ fn drape_vertices_left_inside_are_counted_and_warned_once() {
 fn a_resumed_run_does_not_warn_again() {
     let dir = tempfile::tempdir().unwrap();
     let body = boxed_in(dir.path());
-    let p = plan(
-        4,
-        &format!(
-            r#""body": Mesh(path: {:?}),
-               "coat": Mesh(primitive: Sphere(radius: 0.05, segments: 8, rings: 4),
-                            motion: [Rigid(keys: [(time: 0.0), (time: 1.0, translate: (0.05, 0, 0))])]),
-               "fit": Drape(body: "body", garment: "coat", params: (resolution: 64)),
-               "out": WriteMesh(mesh: "fit", every: 1),"#,
-            body.display().to_string()
-        ),
-    );
+    let p = boxed_in_drape(&body);
     let out = dir.path().join("run");
     let mut o = opts(&out, 0..2);
     o.checkpoint_every = 1;

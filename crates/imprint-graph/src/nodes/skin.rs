@@ -115,28 +115,7 @@ impl SkinNode {
     /// (by extension or magic bytes) with the node's clip, or a rig RON.
     fn load(&self, path: &Path) -> crate::Result<(Skeleton, Option<Arc<Mesh>>)> {
         if is_gltf(path) {
-            let doc = Arc::new(Document::load(path)?);
-            let time = ClipTime {
-                speed: self.speed,
-                looping: self.looping,
-                offset: self.clip_offset,
-            };
-            // Fitted as the character stands at the pipeline's first frame (the file's bind
-            // space may be far from where its clip puts it).
-            let first = match self.clip.as_deref() {
-                Some(c) => {
-                    let clip = doc.clip(c)?;
-                    doc.posed_mesh(Some(clip), time.local(clip, 0.0))
-                }
-                None => doc.mesh.clone(),
-            };
-            let mut skeleton = Skeleton::from_gltf(doc, self.clip.as_deref(), time)?;
-            if let Some(f) = &self.fit {
-                let m = first.fit_transform(f.size, f.center);
-                skeleton = skeleton.fitted(glam::Affine3A::from_mat4(m));
-            }
-            let mesh = skeleton.bound_mesh().cloned();
-            return Ok((skeleton, mesh));
+            return self.load_gltf(path);
         }
         if self.fit.is_some() {
             return Err(Error::Invalid(format!(
@@ -160,6 +139,37 @@ impl SkinNode {
             None => None,
         };
         Ok((Skeleton::from_rig(loaded.rig), mesh))
+    }
+
+    /// A glTF rig: its skin, posed by the node's clip and fitted when asked.
+    fn load_gltf(&self, path: &Path) -> crate::Result<(Skeleton, Option<Arc<Mesh>>)> {
+        let doc = Arc::new(Document::load(path)?);
+        let time = ClipTime {
+            speed: self.speed,
+            looping: self.looping,
+            offset: self.clip_offset,
+        };
+        // Fitted as the character stands at the pipeline's first frame (the file's bind
+        // space may be far from where its clip puts it).
+        let fit = match &self.fit {
+            Some(f) => {
+                let first = match self.clip.as_deref() {
+                    Some(c) => {
+                        let clip = doc.clip(c)?;
+                        doc.posed_mesh(Some(clip), time.local(clip, 0.0))
+                    }
+                    None => doc.mesh.clone(),
+                };
+                Some(first.fit_transform(f.size, f.center))
+            }
+            None => None,
+        };
+        let mut skeleton = Skeleton::from_gltf(doc, self.clip.as_deref(), time)?;
+        if let Some(m) = fit {
+            skeleton = skeleton.fitted(glam::Affine3A::from_mat4(m));
+        }
+        let mesh = skeleton.bound_mesh().cloned();
+        Ok((skeleton, mesh))
     }
 }
 

@@ -50,7 +50,7 @@ impl Posed {
         let index = doc
             .clips
             .iter()
-            .position(|c| std::ptr::eq(c, clip))
+            .position(|c| c.name == name)
             .expect("found above");
         let time = ClipTime {
             speed: params.speed,
