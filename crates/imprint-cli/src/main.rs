@@ -67,6 +67,33 @@ enum Command {
         #[arg(long)]
         resume: bool,
     },
+    /// Run a pipeline live in a window: orbit, play, scrub, hide objects, edit numbers; the
+    /// file and its assets reload on save, keeping the state of nodes that did not change.
+    View {
+        file: PathBuf,
+        /// Overrides the backend of the file and of every node (the window always draws
+        /// with wgpu: a hardware adapter if there is one, the software one otherwise).
+        #[arg(long, value_enum)]
+        backend: Option<BackendArg>,
+        /// Choose `every`, `split` and `interpolate` of the expensive nodes to hold N frames
+        /// per second; the choice is printed as RON to paste into the file.
+        #[arg(long, value_name = "N")]
+        target_fps: Option<f64>,
+        /// Frames to run, `A..B` (B exclusive) or `A..=B`.
+        #[arg(long, value_parser = parse_frames)]
+        frames: Option<Range<u32>>,
+        #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
+        sets: Vec<String>,
+        /// Size of the 3D view, WxH pixels (default: the Render node's image, else 960x540).
+        #[arg(long, value_parser = parse_size)]
+        size: Option<[u32; 2]>,
+        /// Save the window's last frame as PNG (with --exit-after).
+        #[arg(long, value_name = "FILE", requires = "exit_after")]
+        screenshot: Option<PathBuf>,
+        /// Run N frames, then exit (0; 2 if the file never ran; 1 if a frame failed).
+        #[arg(long, value_name = "N")]
+        exit_after: Option<u32>,
+    },
     /// Validate a pipeline; list what will run, on which frames, and what is pruned and why.
     Check {
         file: PathBuf,
@@ -174,13 +201,67 @@ fn parse_frames(s: &str) -> Result<Range<u32>, String> {
     Ok(a..end)
 }
 
+fn parse_size(s: &str) -> Result<[u32; 2], String> {
+    let bad = || format!("'{s}': expected WxH in pixels, e.g. 960x540");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    );
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("'{s}': each side must be 1 to 16384 pixels"));
+    }
+    Ok([w, h])
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Command::View { .. } = cli.command {
+        return view(cli.command);
+    }
     match execute(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             report_error(&e);
             ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}
+
+/// `imprint view`: its own exit codes (see `imprint_view::ViewError`).
+fn view(cmd: Command) -> ExitCode {
+    let Command::View {
+        file,
+        backend,
+        target_fps,
+        frames,
+        sets,
+        size,
+        screenshot,
+        exit_after,
+    } = cmd
+    else {
+        unreachable!("called for View only");
+    };
+    if target_fps.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
+        eprintln!("error: --target-fps must be a number of frames per second > 0");
+        return ExitCode::from(2);
+    }
+    let opts = imprint_view::ViewOptions {
+        file,
+        backend: backend.map(Into::into),
+        target_fps,
+        frames,
+        sets,
+        size,
+        exit_after,
+        screenshot,
+    };
+    match imprint_view::run(opts) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.code)
         }
     }
 }
@@ -254,6 +335,7 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             Ok(())
         }
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::View { .. } => unreachable!("main() runs `view` with its own exit codes"),
         Command::Stress {
             what: StressWhat::Cloth,
             file,

@@ -49,6 +49,12 @@ impl GpuQueue {
         self.inner.submit(command_buffers)
     }
 
+    /// The bare queue, for code that is not a stage and must hand it to a library (the
+    /// viewer's UI renderer): what goes through it is not counted.
+    pub fn uncounted(&self) -> &wgpu::Queue {
+        &self.inner
+    }
+
     /// `wgpu::Queue::get_timestamp_period`.
     pub fn get_timestamp_period(&self) -> f32 {
         self.inner.get_timestamp_period()
@@ -63,6 +69,9 @@ impl std::fmt::Debug for GpuQueue {
 
 /// One wgpu device and queue, with what the stages need to know about them.
 pub struct GpuContext {
+    /// The instance and adapter the device came from (a window's surface is made with them).
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     /// The queue: its writes are counted uploads ([`crate::transfer`]).
     pub queue: GpuQueue,
@@ -153,6 +162,8 @@ impl GpuContext {
             ))
         })?;
         Ok(GpuContext {
+            instance,
+            adapter,
             device,
             queue: GpuQueue { inner: queue },
             adapter_info,

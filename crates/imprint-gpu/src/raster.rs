@@ -348,6 +348,8 @@ pub fn render_texture(
     sample_count: u32,
     usage: wgpu::TextureUsages,
 ) -> Result<wgpu::Texture> {
+    let plain = [format.remove_srgb_suffix()];
+    let view_formats: &[wgpu::TextureFormat] = if plain[0] != format { &plain } else { &[] };
     checked(ctx, &format!("{label} ({width}x{height})"), || {
         ctx.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
@@ -361,7 +363,8 @@ pub fn render_texture(
             dimension: wgpu::TextureDimension::D2,
             format,
             usage: usage | wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
+            // An sRGB image can also be viewed as its plain bytes (a UI library showing it).
+            view_formats,
         })
     })
 }

@@ -7,6 +7,7 @@
 //! and returns a [`report::Report`]. Each node kind is a module of [`nodes`] implementing the
 //! traits of [`node`]; `docs/architecture.md` says how a frame runs.
 
+pub mod budget;
 pub mod diagnostics;
 pub mod exec;
 pub mod executor;

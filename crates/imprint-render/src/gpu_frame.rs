@@ -349,7 +349,7 @@ impl GpuRenderer {
                 height,
                 COLOR_FORMAT,
                 1,
-                wgpu::TextureUsages::COPY_SRC,
+                wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::TEXTURE_BINDING,
             )?;
             let depth = render_texture(
                 ctx,
@@ -431,6 +431,44 @@ impl GpuRenderer {
         scene: &Scene,
         opts: &RenderOptions,
     ) -> Result<RgbImage> {
+        let mut encoder = self.draw(ctx, scene, opts)?;
+        let target = self.target.as_ref().expect("draw made the target");
+        target.readback.copy(&mut encoder, &target.resolved);
+        ctx.queue.submit([encoder.finish()]);
+        let rgba = target.readback.read(ctx)?;
+        let rgb: Vec<u8> = rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
+        RgbImage::from_raw(opts.width, opts.height, rgb)
+            .ok_or_else(|| Error::Gpu("frame readback has the wrong size".into()))
+    }
+
+    /// [`GpuRenderer::render`] without the read-back, for a live view that shows the image
+    /// where it is: a view of it as plain `Rgba8Unorm` (the sRGB-encoded bytes `render` would
+    /// return, alpha 255), valid until the next call.
+    pub fn render_to_view(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        opts: &RenderOptions,
+    ) -> Result<wgpu::TextureView> {
+        let encoder = self.draw(ctx, scene, opts)?;
+        ctx.queue.submit([encoder.finish()]);
+        let target = self.target.as_ref().expect("draw made the target");
+        Ok(target.resolved.create_view(&wgpu::TextureViewDescriptor {
+            format: Some(wgpu::TextureFormat::Rgba8Unorm),
+            ..Default::default()
+        }))
+    }
+
+    /// Records the frame's passes into this renderer's target; the caller submits.
+    fn draw(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        opts: &RenderOptions,
+    ) -> Result<wgpu::CommandEncoder> {
         if ctx.device != self.device {
             return Err(Error::Invalid(
                 "GpuRenderer used with another GPU context than it was made with".into(),
@@ -629,14 +667,6 @@ impl GpuRenderer {
                 pass.draw(0..line_count, 0..1);
             }
         }
-        target.readback.copy(&mut encoder, &target.resolved);
-        ctx.queue.submit([encoder.finish()]);
-        let rgba = target.readback.read(ctx)?;
-        let rgb: Vec<u8> = rgba
-            .chunks_exact(4)
-            .flat_map(|p| [p[0], p[1], p[2]])
-            .collect();
-        RgbImage::from_raw(opts.width, opts.height, rgb)
-            .ok_or_else(|| Error::Gpu("frame readback has the wrong size".into()))
+        Ok(encoder)
     }
 }

@@ -67,7 +67,26 @@ impl Executor {
     /// cloth keeps falling; its stiffness changed: it starts again from rest). Returns the
     /// nodes built anew. On an error the executor keeps its old plan.
     pub fn reload(&mut self, plan: &Plan) -> crate::Result<Vec<String>> {
-        let same = self.unchanged_nodes(plan);
+        self.reload_stale(plan, &BTreeSet::new())
+    }
+
+    /// [`Executor::reload`], building the nodes named in `stale` anew even where their spec
+    /// did not change (a mesh file they read was saved), and everything downstream of them.
+    pub fn reload_stale(
+        &mut self,
+        plan: &Plan,
+        stale: &BTreeSet<String>,
+    ) -> crate::Result<Vec<String>> {
+        let mut same = self.unchanged_nodes(plan);
+        for name in &plan.topo {
+            let reads_stale = plan.file.nodes[name]
+                .inputs()
+                .iter()
+                .any(|p| !same.contains(p.node));
+            if stale.contains(name) || reads_stale {
+                same.remove(name);
+            }
+        }
         let old_plan = std::mem::replace(&mut self.plan, plan.clone());
         for (name, _) in old_plan
             .file

@@ -1,0 +1,122 @@
+//! `--target-fps N` in the window: measure the frames, let the scheduler choose `every`,
+//! `split` and `interpolate` for the expensive nodes (`imprint_graph::budget`), apply the
+//! choice as live edits, show it with what it costs, and print it as RON to paste.
+
+use crate::panel::PanelOut;
+use crate::session::{Reloaded, Session};
+use egui::{RichText, Ui};
+use imprint_graph::budget::{Budget, Measured, choose};
+use imprint_graph::executor::FrameSummary;
+
+/// Frames measured before choosing (after the first ones, which load and build).
+const MEASURE: u32 = 8;
+const SKIP: u32 = 2;
+
+pub struct BudgetView {
+    target_fps: f64,
+    measured: Measured,
+    seen: u32,
+    chosen: Option<Budget>,
+    /// Frames and their total ms since the choice was applied: the fps held.
+    held: (u32, f64),
+}
+
+impl BudgetView {
+    pub fn new(target_fps: f64) -> BudgetView {
+        BudgetView {
+            target_fps,
+            measured: Measured::new(),
+            seen: 0,
+            chosen: None,
+            held: (0, 0.0),
+        }
+    }
+
+    /// A frame stepped, and what drawing and the UI took around it.
+    pub fn observe(&mut self, summary: &FrameSummary, draw_ui_ms: f64) {
+        self.seen += 1;
+        if self.chosen.is_some() {
+            self.held.0 += 1;
+            self.held.1 += summary.ms + draw_ui_ms;
+            return;
+        }
+        if self.seen > SKIP {
+            self.measured.add_frame(summary);
+            self.measured.add_overhead_ms(draw_ui_ms);
+        }
+    }
+
+    /// Chooses once enough frames were measured, and applies the choice.
+    fn decide(&mut self, session: &mut Session, out: &mut PanelOut) {
+        if self.chosen.is_some() || self.measured.frames() < MEASURE {
+            return;
+        }
+        let Some(plan) = session.plan() else {
+            return;
+        };
+        let budget = choose(plan, &self.measured, self.target_fps);
+        for a in budget.assignments() {
+            if session.edit(a) == Reloaded::Refused {
+                break;
+            }
+            out.reloaded = true;
+        }
+        crate::app::say(&self.report_of(&budget));
+        self.chosen = Some(budget);
+    }
+
+    pub fn show(&mut self, ui: &mut Ui, session: &mut Session, out: &mut PanelOut) {
+        self.decide(session, out);
+        egui::CollapsingHeader::new(format!("Frame budget: {} fps", self.target_fps))
+            .default_open(true)
+            .show(ui, |ui| match &self.chosen {
+                None => {
+                    ui.label(format!(
+                        "measuring ({} of {} frames)",
+                        self.measured.frames(),
+                        MEASURE
+                    ));
+                }
+                Some(b) => {
+                    ui.label(self.report_of(b));
+                    ui.label(RichText::new(b.ron_snippet()).monospace().small());
+                    if ui.button("Copy the RON").clicked() {
+                        ui.ctx().copy_text(b.ron_snippet());
+                    }
+                    if ui.button("Measure and choose again").clicked() {
+                        *self = BudgetView::new(self.target_fps);
+                    }
+                }
+            });
+    }
+
+    fn report_of(&self, b: &Budget) -> String {
+        let mut s = format!(
+            "budget: target {:.1} ms ({} fps), predicted {:.1} ms, {}",
+            b.target_ms,
+            self.target_fps,
+            b.predicted_ms,
+            if b.met { "met" } else { "not met" }
+        );
+        for c in &b.choices {
+            s += &format!(
+                "\n  {}: every {}, split {}, interpolate {} ({:.1} ms per build, {:.1} ms per \
+                 frame): {}",
+                c.node, c.every, c.split, c.interpolate, c.build_ms, c.per_frame_ms, c.cost
+            );
+        }
+        let (n, ms) = self.held;
+        if n > 0 {
+            s += &format!("\n  held: {:.1} fps over {n} frames", 1e3 * n as f64 / ms);
+        }
+        s
+    }
+
+    /// The choice and the fps held, for the end of a headless run.
+    pub fn report(&self) -> String {
+        match &self.chosen {
+            Some(b) => format!("{}\n{}", self.report_of(b), b.ron_snippet()),
+            None => "budget: not enough frames measured to choose".into(),
+        }
+    }
+}
