@@ -16,8 +16,11 @@ use crate::schedule::Schedule;
 use crate::schema::{Backend, NodeSpec};
 use std::collections::{BTreeMap, BTreeSet};
 
-/// The `every` values tried, smallest first (never above the pipeline's frames).
-const EVERY: [u32; 5] = [1, 2, 4, 8, 16];
+/// The `every` values tried, smallest first (never above the pipeline's frames). No more
+/// than 8: on H's twisting bunny, fields blended between builds 16 frames (0.67 s) apart
+/// let the 80-substep cloth explode at frame 33 (`imprint view pipelines/harada_cloth.ron
+/// --target-fps 24` before this cap), so the budget says "not met" rather than go there.
+const EVERY: [u32; 4] = [1, 2, 4, 8];
 /// Fields cheaper than this fraction of the target are left as they are.
 const CHEAP: f64 = 0.01;
 
@@ -505,8 +508,8 @@ mod tests {
 
     #[test]
     fn an_interpolated_field_voxelises_itself_whole_and_the_voxelize_is_pruned() {
-        // The 6 ms voxelisation moves into the build's first part: 30.2 + 6 + 66/e... e = 8
-        // gives 43.7, e = 16 gives 39.95.
+        // The 6 ms voxelisation moves into the build's first part: 30.2 + 6 + 60/e; e = 8
+        // (the largest tried) gives 43.7 > 41.67: not met.
         let costs = [
             ("bunny", 0.2),
             ("boundary", 6.0),
@@ -516,14 +519,15 @@ mod tests {
         let text = text("harada_cloth.ron");
         let b = choose(&plan(&text), &steady(&costs, 10.0), 24.0);
         close(b.fixed_ms, 30.2);
-        close(b.predicted_ms, 39.95);
+        close(b.predicted_ms, 43.7);
+        assert!(!b.met);
         let c = &b.choices[0];
         assert_eq!(
             (c.every, c.split, c.interpolate, c.changed),
-            (16, 16, true, true)
+            (8, 8, true, true)
         );
         close(c.build_ms, 66.0);
-        close(c.per_frame_ms, 60.0 / 16.0 + 6.0);
+        close(c.per_frame_ms, 60.0 / 8.0 + 6.0);
         let p = applied(&text, &b);
         let why = p
             .pruned

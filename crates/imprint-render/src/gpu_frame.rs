@@ -47,7 +47,8 @@ use imprint_gpu::{GpuContext, shader};
 use std::collections::HashMap;
 use std::ops::Range;
 
-/// Format of the colour target: linear shading in, sRGB bytes out.
+/// Format of the colour target: linear shading in, sRGB bytes out (a window may ask for its
+/// BGRA twin, [`GpuRenderer::with_format`]).
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 /// MSAA sample count used when `RenderOptions::samples > 1`.
 pub const MSAA_SAMPLES: u32 = 4;
@@ -121,6 +122,8 @@ struct Target {
 #[derive(Debug)]
 pub struct GpuRenderer {
     device: wgpu::Device,
+    /// The image's format: sRGB RGBA, or BGRA to be copied into a window's surface.
+    format: wgpu::TextureFormat,
     shade: wgpu::ShaderModule,
     line: wgpu::ShaderModule,
     /// Group 0 only (meshes, lines).
@@ -142,6 +145,18 @@ pub struct GpuRenderer {
 
 impl GpuRenderer {
     pub fn new(ctx: &GpuContext) -> Result<Self> {
+        Self::with_format(ctx, COLOR_FORMAT)
+    }
+
+    /// A renderer whose image is `Rgba8UnormSrgb` or `Bgra8UnormSrgb` (the format of most
+    /// window surfaces, so a live view copies the image into the window as it is).
+    pub fn with_format(ctx: &GpuContext, format: wgpu::TextureFormat) -> Result<Self> {
+        use wgpu::TextureFormat::{Bgra8UnormSrgb, Rgba8UnormSrgb};
+        if !matches!(format, Rgba8UnormSrgb | Bgra8UnormSrgb) {
+            return Err(Error::Invalid(format!(
+                "GpuRenderer: images are Rgba8UnormSrgb or Bgra8UnormSrgb, not {format:?}"
+            )));
+        }
         let camera = shader!("render/camera.wgsl");
         let shade = shader_module(
             ctx,
@@ -203,6 +218,7 @@ impl GpuRenderer {
         let vertex = wgpu::BufferUsages::VERTEX;
         Ok(GpuRenderer {
             device: ctx.device.clone(),
+            format,
             shade,
             line,
             layout,
@@ -262,7 +278,7 @@ impl GpuRenderer {
                             module,
                             entry_point: Some(entry.1),
                             compilation_options: Default::default(),
-                            targets: &[Some(COLOR_FORMAT.into())],
+                            targets: &[Some(self.format.into())],
                         }),
                         multiview_mask: None,
                         cache: None,
@@ -334,7 +350,7 @@ impl GpuRenderer {
                     "frame (multisampled)",
                     width,
                     height,
-                    COLOR_FORMAT,
+                    self.format,
                     samples,
                     wgpu::TextureUsages::empty(),
                 )?;
@@ -347,7 +363,7 @@ impl GpuRenderer {
                 "frame",
                 width,
                 height,
-                COLOR_FORMAT,
+                self.format,
                 1,
                 wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::TEXTURE_BINDING,
             )?;
@@ -436,30 +452,27 @@ impl GpuRenderer {
         target.readback.copy(&mut encoder, &target.resolved);
         ctx.queue.submit([encoder.finish()]);
         let rgba = target.readback.read(ctx)?;
+        let bgra = self.format == wgpu::TextureFormat::Bgra8UnormSrgb;
         let rgb: Vec<u8> = rgba
             .chunks_exact(4)
-            .flat_map(|p| [p[0], p[1], p[2]])
+            .flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] })
             .collect();
         RgbImage::from_raw(opts.width, opts.height, rgb)
             .ok_or_else(|| Error::Gpu("frame readback has the wrong size".into()))
     }
 
     /// [`GpuRenderer::render`] without the read-back, for a live view that shows the image
-    /// where it is: a view of it as plain `Rgba8Unorm` (the sRGB-encoded bytes `render` would
-    /// return, alpha 255), valid until the next call.
-    pub fn render_to_view(
+    /// where it is: the image (its bytes are the sRGB-encoded ones `render` returns, alpha
+    /// 255), valid until the next call.
+    pub fn render_to_texture(
         &mut self,
         ctx: &GpuContext,
         scene: &Scene,
         opts: &RenderOptions,
-    ) -> Result<wgpu::TextureView> {
+    ) -> Result<wgpu::Texture> {
         let encoder = self.draw(ctx, scene, opts)?;
         ctx.queue.submit([encoder.finish()]);
-        let target = self.target.as_ref().expect("draw made the target");
-        Ok(target.resolved.create_view(&wgpu::TextureViewDescriptor {
-            format: Some(wgpu::TextureFormat::Rgba8Unorm),
-            ..Default::default()
-        }))
+        Ok(self.target.as_ref().expect("draw made the target").resolved.clone())
     }
 
     /// Records the frame's passes into this renderer's target; the caller submits.

@@ -237,7 +237,12 @@ impl App {
         let plan = self.session.plan().expect("an executor has a plan");
         let render = scene::render_node(plan);
         let grid = render.is_none_or(|r| r.ground_grid);
-        let samples = render.map_or(1, |r| r.samples);
+        let file_samples = render.map_or(1, |r| r.samples);
+        let samples = if self.panel.antialias.unwrap_or(!self.gpu.is_software()) {
+            file_samples
+        } else {
+            1
+        };
         let [w, h] = size;
         let drawn = scene::scene(ex, &self.objects, grid).and_then(|(scene, legend)| {
             self.panel.legend = legend;
@@ -247,7 +252,7 @@ impl App {
                 samples,
                 camera: camera.camera(time)?,
             };
-            display.draw_scene(&scene, &opts).map(|_| ())
+            display.draw_scene(&scene, &opts)
         });
         if let Err(e) = drawn {
             say(&format!("error: drawing the view: {e}"));
@@ -277,7 +282,8 @@ impl App {
         state.handle_platform_output(&display.window, full.platform_output);
         let ppp = full.pixels_per_point;
         let jobs = self.egui.tessellate(full.shapes, ppp);
-        let shot = match display.present(&jobs, &full.textures_delta, ppp, capture) {
+        let at = self.panel.view_rect;
+        let shot = match display.present(&jobs, &full.textures_delta, ppp, at, capture) {
             Ok(s) => s,
             Err(e) => {
                 self.exit = Some(Err(e));

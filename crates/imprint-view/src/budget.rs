@@ -17,8 +17,9 @@ pub struct BudgetView {
     measured: Measured,
     seen: u32,
     chosen: Option<Budget>,
-    /// Frames and their total ms since the choice was applied: the fps held.
-    held: (u32, f64),
+    /// Frames since the choice was applied, their work (step, drawing, UI) in ms, and when
+    /// the first of them started: the fps held and the fps the work alone would allow.
+    held: (u32, f64, Option<std::time::Instant>),
 }
 
 impl BudgetView {
@@ -28,7 +29,7 @@ impl BudgetView {
             measured: Measured::new(),
             seen: 0,
             chosen: None,
-            held: (0, 0.0),
+            held: (0, 0.0, None),
         }
     }
 
@@ -36,6 +37,11 @@ impl BudgetView {
     pub fn observe(&mut self, summary: &FrameSummary, draw_ui_ms: f64) {
         self.seen += 1;
         if self.chosen.is_some() {
+            // The first frame after the reload builds its fields whole: not counted.
+            if self.held.2.is_none() {
+                self.held.2 = Some(std::time::Instant::now());
+                return;
+            }
             self.held.0 += 1;
             self.held.1 += summary.ms + draw_ui_ms;
             return;
@@ -105,9 +111,13 @@ impl BudgetView {
                 c.node, c.every, c.split, c.interpolate, c.build_ms, c.per_frame_ms, c.cost
             );
         }
-        let (n, ms) = self.held;
-        if n > 0 {
-            s += &format!("\n  held: {:.1} fps over {n} frames", 1e3 * n as f64 / ms);
+        if let (n @ 1.., ms, Some(since)) = self.held {
+            let wall = since.elapsed().as_secs_f64();
+            s += &format!(
+                "\n  held: {:.1} fps over {n} frames ({:.1} ms of work a frame)",
+                n as f64 / wall.max(1e-9),
+                ms / n as f64
+            );
         }
         s
     }

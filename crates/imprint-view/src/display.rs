@@ -18,6 +18,14 @@ pub struct ViewTexture {
     pub size: [u32; 2],
 }
 
+/// How the 3D view reaches the window: copied into the surface where the view is (cheap:
+/// no second pass over its pixels, which costs as much as drawing it on a software
+/// rasteriser), or, where the surface cannot be copied to, drawn by the UI as a texture.
+enum Route {
+    Copy { image: Option<wgpu::Texture> },
+    Texture(Option<ViewTexture>),
+}
+
 pub struct Display {
     pub window: Arc<Window>,
     gpu: &'static GpuContext,
@@ -25,7 +33,7 @@ pub struct Display {
     config: wgpu::SurfaceConfiguration,
     ui: Renderer,
     scene: GpuRenderer,
-    view: Option<ViewTexture>,
+    route: Route,
 }
 
 impl Display {
@@ -50,8 +58,18 @@ impl Display {
                 ))
             })?;
         let size = window.inner_size();
+        let srgb = match format {
+            wgpu::TextureFormat::Bgra8Unorm => Some(wgpu::TextureFormat::Bgra8UnormSrgb),
+            wgpu::TextureFormat::Rgba8Unorm => Some(wgpu::TextureFormat::Rgba8UnormSrgb),
+            _ => None,
+        };
+        let copy = caps.usages.contains(wgpu::TextureUsages::COPY_DST) && srgb.is_some();
+        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        if copy {
+            usage |= wgpu::TextureUsages::COPY_DST;
+        }
         let config = wgpu::SurfaceConfiguration {
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            usage,
             format,
             width: size.width.max(1),
             height: size.height.max(1),
@@ -67,14 +85,20 @@ impl Display {
             dithering: false,
             ..RendererOptions::default()
         };
+        let (scene_format, route) = match srgb.filter(|_| copy) {
+            Some(f) => (f, Route::Copy { image: None }),
+            None => (wgpu::TextureFormat::Rgba8UnormSrgb, Route::Texture(None)),
+        };
+        let scene = GpuRenderer::with_format(gpu, scene_format)
+            .map_err(|e| ViewError::display(e.to_string()))?;
         Ok(Display {
             window,
             gpu,
             surface,
             config,
             ui: Renderer::new(&gpu.device, format, options),
-            scene: GpuRenderer::new(gpu).map_err(|e| ViewError::display(e.to_string()))?,
-            view: None,
+            scene,
+            route,
         })
     }
 
@@ -91,46 +115,51 @@ impl Display {
     }
 
     /// Draws the 3D view and waits for it (so its time is the drawing's, not the UI's).
-    pub fn draw_scene(
-        &mut self,
-        scene: &Scene,
-        opts: &RenderOptions,
-    ) -> imprint_core::Result<&ViewTexture> {
-        let view = self.scene.render_to_view(self.gpu, scene, opts)?;
+    pub fn draw_scene(&mut self, scene: &Scene, opts: &RenderOptions) -> imprint_core::Result<()> {
+        let image = self.scene.render_to_texture(self.gpu, scene, opts)?;
         let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
-        let size = [opts.width, opts.height];
-        let filter = wgpu::FilterMode::Nearest;
-        match &mut self.view {
-            Some(v) => {
-                self.ui.update_egui_texture_from_wgpu_texture(
-                    &self.gpu.device,
-                    &view,
-                    filter,
-                    v.id,
-                );
-                v.size = size;
-            }
-            None => {
-                let id = self
-                    .ui
-                    .register_native_texture(&self.gpu.device, &view, filter);
-                self.view = Some(ViewTexture { id, size });
+        match &mut self.route {
+            Route::Copy { image: kept } => *kept = Some(image),
+            Route::Texture(view) => {
+                let plain = image.create_view(&wgpu::TextureViewDescriptor {
+                    format: Some(wgpu::TextureFormat::Rgba8Unorm),
+                    ..Default::default()
+                });
+                let (device, filter) = (&self.gpu.device, wgpu::FilterMode::Nearest);
+                let size = [opts.width, opts.height];
+                match view {
+                    Some(v) => {
+                        self.ui
+                            .update_egui_texture_from_wgpu_texture(device, &plain, filter, v.id);
+                        v.size = size;
+                    }
+                    None => {
+                        let id = self.ui.register_native_texture(device, &plain, filter);
+                        *view = Some(ViewTexture { id, size });
+                    }
+                }
             }
         }
-        Ok(self.view.as_ref().expect("set above"))
+        Ok(())
     }
 
+    /// The 3D view for the UI to draw, when it is not copied into the window.
     pub fn view_texture(&self) -> Option<&ViewTexture> {
-        self.view.as_ref()
+        match &self.route {
+            Route::Texture(v) => v.as_ref(),
+            Route::Copy { .. } => None,
+        }
     }
 
     /// Uploads the UI's textures and draws `jobs` to the window; with `capture`, also into an
     /// image of the window read back.
+    /// The view is copied to `view_at` (pixels) first, when it is copied.
     pub fn present(
         &mut self,
         jobs: &[egui::ClippedPrimitive],
         textures: &egui::TexturesDelta,
         pixels_per_point: f32,
+        view_at: Option<[u32; 4]>,
         capture: bool,
     ) -> Result<Option<RgbImage>, ViewError> {
         let (device, queue) = (&self.gpu.device, self.gpu.queue.uncounted());
@@ -148,8 +177,8 @@ impl Display {
             | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             other => {
                 // Lost or outdated (a resize under way): configure again, draw next time.
-                self.surface.configure(device, &self.config);
                 let _ = other;
+                self.surface.configure(device, &self.config);
                 return Ok(None);
             }
         };
@@ -158,9 +187,10 @@ impl Display {
         let mut commands = self
             .ui
             .update_buffers(device, queue, &mut encoder, jobs, &screen);
-        self.ui_pass(&mut encoder, &target, jobs, &screen);
+        let covered = self.copy_view(&mut encoder, &frame.texture, view_at);
+        self.ui_pass(&mut encoder, &target, jobs, &screen, covered);
         let shot = if capture {
-            Some(self.capture(&mut encoder, jobs, &screen)?)
+            Some(self.capture(&mut encoder, jobs, &screen, view_at)?)
         } else {
             None
         };
@@ -182,7 +212,14 @@ impl Display {
         target: &wgpu::TextureView,
         jobs: &[egui::ClippedPrimitive],
         screen: &ScreenDescriptor,
+        keep: bool,
     ) {
+        // What the copy put there stays; otherwise the window starts from black.
+        let load = if keep {
+            wgpu::LoadOp::Load
+        } else {
+            wgpu::LoadOp::Clear(wgpu::Color::BLACK)
+        };
         let mut pass = encoder
             .begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("viewer UI"),
@@ -191,7 +228,7 @@ impl Display {
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        load,
                         store: wgpu::StoreOp::Store,
                     },
                 })],
@@ -201,12 +238,42 @@ impl Display {
         self.ui.render(&mut pass, jobs, screen);
     }
 
-    /// The same UI pass into an image of the window's size and format, for a screenshot.
+    /// Copies the 3D view into `window` at `view_at`; returns whether the view and the panel
+    /// then cover the window (the view fills its rectangle, which reaches the window's
+    /// right and bottom edges).
+    fn copy_view(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        window: &wgpu::Texture,
+        view_at: Option<[u32; 4]>,
+    ) -> bool {
+        let (Route::Copy { image: Some(image) }, Some([x, y, w, h])) = (&self.route, view_at)
+        else {
+            return false;
+        };
+        let [ww, wh] = self.size();
+        let fits = image.width() == w && image.height() == h && x + w == ww && y + h == wh;
+        if !fits {
+            return false;
+        }
+        encoder.copy_texture_to_texture(
+            image.as_image_copy(),
+            wgpu::TexelCopyTextureInfo {
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                ..window.as_image_copy()
+            },
+            image.size(),
+        );
+        true
+    }
+
+    /// The same passes into an image of the window's size and format, for a screenshot.
     fn capture(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         jobs: &[egui::ClippedPrimitive],
         screen: &ScreenDescriptor,
+        view_at: Option<[u32; 4]>,
     ) -> Result<(wgpu::Texture, TextureReadback), ViewError> {
         let [w, h] = self.size();
         let fail = |e: imprint_core::Error| ViewError::failed(format!("screenshot: {e}"));
@@ -217,11 +284,12 @@ impl Display {
             h,
             self.config.format,
             1,
-            wgpu::TextureUsages::COPY_SRC,
+            wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST,
         )
         .map_err(fail)?;
         let view = texture.create_view(&Default::default());
-        self.ui_pass(encoder, &view, jobs, screen);
+        let covered = self.copy_view(encoder, &texture, view_at);
+        self.ui_pass(encoder, &view, jobs, screen, covered);
         let readback = TextureReadback::new(self.gpu, w, h, 4).map_err(fail)?;
         readback.copy(encoder, &texture);
         Ok((texture, readback))

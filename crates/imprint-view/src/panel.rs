@@ -41,6 +41,10 @@ pub struct Panel {
     /// Simulation, drawing and UI of the last frame stepped, ms.
     pub last_times: [f64; 3],
     pub budget: Option<BudgetView>,
+    /// Anti-aliasing as the Render node asks (`Some(true)`), off, or the default (`None`):
+    /// as the file asks on a hardware GPU, off on a software one, where 4x MSAA doubles the
+    /// drawing time.
+    pub antialias: Option<bool>,
     /// The file's camera, to return to (R).
     file_camera: Option<OrbitCamera>,
     message: Option<String>,
@@ -59,6 +63,7 @@ impl Panel {
             legend: None,
             last_times: [0.0; 3],
             budget: target_fps.map(BudgetView::new),
+            antialias: None,
             file_camera: None,
             message: None,
             drafts: HashMap::new(),
@@ -96,7 +101,8 @@ impl Panel {
                 });
             });
         egui::CentralPanel::default()
-            .frame(egui::Frame::NONE.fill(Color32::from_gray(20)))
+            // No fill: the 3D view is copied into the window under this panel.
+            .frame(egui::Frame::NONE)
             .show(ui, |ui| self.view(ui, session, camera, view, &mut out));
         out
     }
@@ -195,6 +201,12 @@ impl Panel {
                 }
                 if let Some(l) = &self.legend {
                     legend(ui, l);
+                }
+                let mut aa = self.antialias.unwrap_or(!software());
+                let label = "anti-aliasing as the file asks (slow on a software GPU)";
+                if ui.checkbox(&mut aa, label).changed() {
+                    self.antialias = Some(aa);
+                    out.redraw = true;
                 }
             });
     }
@@ -333,6 +345,10 @@ impl Panel {
             out.redraw = true;
         }
     }
+}
+
+fn software() -> bool {
+    imprint_gpu::GpuContext::shared().is_ok_and(|g| g.is_software())
 }
 
 fn back_one(session: &mut Session, out: &mut PanelOut) {
