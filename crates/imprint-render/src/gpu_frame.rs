@@ -455,7 +455,13 @@ impl GpuRenderer {
         let bgra = self.format == wgpu::TextureFormat::Bgra8UnormSrgb;
         let rgb: Vec<u8> = rgba
             .chunks_exact(4)
-            .flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] })
+            .flat_map(|p| {
+                if bgra {
+                    [p[2], p[1], p[0]]
+                } else {
+                    [p[0], p[1], p[2]]
+                }
+            })
             .collect();
         RgbImage::from_raw(opts.width, opts.height, rgb)
             .ok_or_else(|| Error::Gpu("frame readback has the wrong size".into()))
@@ -472,7 +478,12 @@ impl GpuRenderer {
     ) -> Result<wgpu::Texture> {
         let encoder = self.draw(ctx, scene, opts)?;
         ctx.queue.submit([encoder.finish()]);
-        Ok(self.target.as_ref().expect("draw made the target").resolved.clone())
+        Ok(self
+            .target
+            .as_ref()
+            .expect("draw made the target")
+            .resolved
+            .clone())
     }
 
     /// Records the frame's passes into this renderer's target; the caller submits.

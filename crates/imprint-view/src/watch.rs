@@ -150,7 +150,7 @@ mod tests {
         let file = dir.path().join("p.ron");
         let text = r#"Pipeline(frames: 2, nodes: {
             "m": Mesh(path: "tri.obj"),
-            "hm": Heightmap(mesh: "m", grid: (origin: (0, 0), cell: 0.1, dims: (4, 4)), from: Below),
+            "hm": Heightmap(mesh: "m", view: Above, grid: Fit(resolution: 8, padding: 0.1)),
             "w": WriteHeightmap(heights: "hm"),
         })"#;
         std::fs::write(&file, text).unwrap();
