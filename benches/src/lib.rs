@@ -8,6 +8,7 @@ pub mod render;
 pub mod schedule;
 pub mod skin;
 pub mod stages_gpu;
+pub mod view;
 
 use imprint_core::{DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;

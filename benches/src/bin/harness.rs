@@ -24,7 +24,7 @@ use std::fmt::Write;
 use std::path::PathBuf;
 
 /// The sections, in the order BENCHMARKS.md shows them: (name for `--only`, what it covers).
-const SECTIONS: [(&str, &str); 11] = [
+const SECTIONS: [(&str, &str); 12] = [
     (
         "field",
         "distance fields on the CPU: H Table 1 and triangle-count scaling",
@@ -48,6 +48,7 @@ const SECTIONS: [(&str, &str); 11] = [
         "stages_gpu",
         "each stage with a GPU path, GPU against CPU per frame",
     ),
+    ("view", "the live viewer under Xvfb: fps held, sim/draw/UI"),
 ];
 
 fn main() {
@@ -102,6 +103,7 @@ fn main() {
             "colliders" => imprint_benches::colliders::section(&root, repeat),
             "skin" => imprint_benches::skin::section(&root, repeat),
             "stages_gpu" => imprint_benches::stages_gpu::section(&root, repeat),
+            "view" => imprint_benches::view::section(&root, repeat),
             _ => unreachable!(),
         };
         let stamp = format!(

@@ -156,29 +156,27 @@ impl App {
         self.dirty = true;
     }
 
-    /// Steps one frame when playing and due.
-    fn step_if_due(&mut self) -> f64 {
+    /// Steps one frame when playing and due; the step's ms when a frame ran.
+    fn step_if_due(&mut self) -> Option<f64> {
         let due = self.panel.playing && Instant::now() >= self.next_step;
-        if !(due || self.panel.step_once) {
-            return 0.0;
+        if !(due || self.panel.step_once) || self.session.executor().is_none() {
+            return None;
         }
         self.panel.step_once = false;
         let t = Instant::now();
-        let ran = self.session.step(self.panel.looping);
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        if ran {
+        if self.session.step(self.panel.looping) {
             self.stepped += 1;
             self.started.get_or_insert(t);
             self.dirty = true;
             let period = Duration::from_secs_f64(1.0 / self.fps());
             self.next_step = (self.next_step + period).max(Instant::now() - period);
-        } else {
-            self.panel.playing = false;
-            if let Some(p) = self.session.problem() {
-                say(&format!("error: {}", p.message));
-            }
+            return Some(t.elapsed().as_secs_f64() * 1e3);
         }
-        ms
+        self.panel.playing = false;
+        if let Some(p) = self.session.problem() {
+            say(&format!("error: {}", p.message));
+        }
+        None
     }
 
     /// The whole frame; returns whether the headless run is over.
@@ -192,7 +190,7 @@ impl App {
         let last = self.headless_done();
         let shot = self.run_panel(last && self.opts.screenshot.is_some());
         let ui_ms = t.elapsed().as_secs_f64() * 1e3;
-        if sim_ms > 0.0 {
+        if let Some(sim_ms) = sim_ms {
             self.count(sim_ms, if drew { draw_ms } else { 0.0 }, ui_ms);
         }
         if let Some(img) = shot {

@@ -2,8 +2,8 @@
 //! scrubbing, each node's time, backend and metrics, objects shown or hidden, field slices,
 //! the height legend, live edits with write-back, the frame budget's choice, and the problem
 //! to fix. Drag to orbit, right- or middle-drag to pan, scroll to zoom; keys: space
-//! play/pause, `.` step, `,` back, Home first frame, arrows orbit, +/- zoom, R the file's
-//! camera.
+//! play/pause, `.` step, `,` back, Home first frame, arrows orbit (with Shift: pan), +/-
+//! zoom, R the file's camera.
 
 use crate::PANEL_WIDTH;
 use crate::app::Timing;
@@ -306,17 +306,11 @@ impl Panel {
         );
         let time =
             session.shown_frame().unwrap_or(0) as f32 / session.plan().map_or(24.0, |p| p.file.fps);
-        if let Some(cam) = camera {
-            if drive_camera(
-                ui,
-                &response,
-                cam,
-                time,
-                pixels[1] as f32,
-                self.file_camera.as_ref(),
-            ) {
-                out.redraw = true;
-            }
+        let file = self.file_camera.as_ref();
+        if let Some(cam) = camera
+            && drive_camera(ui, &response, cam, time, pixels[1] as f32, file)
+        {
+            out.redraw = true;
         }
         self.keys(ui, session, out);
         if let Some(p) = session.problem() {
@@ -391,7 +385,10 @@ fn drive_camera(
             f32::from(key(egui::Key::ArrowLeft)) - f32::from(key(egui::Key::ArrowRight)),
             f32::from(key(egui::Key::ArrowUp)) - f32::from(key(egui::Key::ArrowDown)),
         );
-        if dx != 0.0 || dy != 0.0 {
+        let shift = ui.input(|i| i.modifiers.shift);
+        if (dx != 0.0 || dy != 0.0) && shift {
+            cam.pan(time, -dx * step, -dy * step, height);
+        } else if dx != 0.0 || dy != 0.0 {
             cam.rotate(time, -dx * step, dy * step);
         }
         if ui.input(|i| i.key_pressed(egui::Key::Plus) || i.key_pressed(egui::Key::Equals)) {

@@ -195,3 +195,30 @@ fn scrubbing_back_shows_the_same_values_as_the_first_time() {
     s.show(9);
     assert_eq!(cloth(&s), at_9);
 }
+
+#[test]
+fn a_saved_asset_rebuilds_the_nodes_that_read_it_and_what_follows() {
+    let dir = tempfile::tempdir().unwrap();
+    let suzanne = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/meshes/suzanne.obj");
+    let mesh = dir.path().join("head.obj");
+    std::fs::copy(&suzanne, &mesh).unwrap();
+    let path = write_pipeline(dir.path());
+    edit_file(
+        &path,
+        &suzanne.canonicalize().unwrap().display().to_string(),
+        "head.obj",
+    );
+    let mut s = Session::open(&path, &[], None, None);
+    steps(&mut s, 2);
+    // The file's text did not change, but the mesh it reads did.
+    let stale = std::collections::BTreeSet::from(["head".to_string()]);
+    let Reloaded::Applied { rebuilt } = s.reload_with(&stale) else {
+        panic!("{:?}", s.problem());
+    };
+    assert_eq!(rebuilt, ["head", "boundary", "field", "cloth"]);
+    assert_eq!(
+        s.reload(),
+        Reloaded::Unchanged,
+        "without a changed asset nothing happens"
+    );
+}
