@@ -5,7 +5,7 @@
 //! the present).
 
 use crate::camera::OrbitCamera;
-use crate::display::Display;
+use crate::display::{Display, UiFrame};
 use crate::panel::{Panel, PanelOut};
 use crate::scene::{self, ViewObject};
 use crate::session::{Reloaded, Session};
@@ -22,6 +22,10 @@ use winit::window::{Window, WindowId};
 
 /// Redraws at least this often when paused (a save, the panel's hover).
 const IDLE_REDRAW: Duration = Duration::from_millis(100);
+/// While playing with no input, the panel is laid out and drawn this often; the frames in
+/// between copy the panel drawn last (on a software GPU its pass costs as much as a third of
+/// the view's).
+const PANEL_PERIOD: Duration = Duration::from_millis(100);
 const DEFAULT_SIZE: [u32; 2] = [960, 540];
 
 pub fn run(opts: ViewOptions) -> Result<(), ViewError> {
@@ -64,9 +68,15 @@ struct App {
     stepped: u32,
     next_step: Instant,
     started: Option<Instant>,
+    /// When the second frame began: the fps after the first (loading, first builds).
+    second: Option<Instant>,
     timing: Timing,
     /// The 3D view must be drawn again (a new frame, camera or object list).
     dirty: bool,
+    /// Input arrived for the UI since it last ran (it runs on the next frame).
+    ui_input: bool,
+    /// When the UI last ran.
+    last_ui: Option<Instant>,
     exit: Option<Result<(), ViewError>>,
 }
 
@@ -84,8 +94,11 @@ impl App {
             stepped: 0,
             next_step: Instant::now(),
             started: None,
+            second: None,
             timing: Timing::default(),
             dirty: true,
+            ui_input: true,
+            last_ui: None,
             exit: None,
             opts,
             gpu,
@@ -167,6 +180,9 @@ impl App {
         if self.session.step(self.panel.looping) {
             self.stepped += 1;
             self.started.get_or_insert(t);
+            if self.stepped == 2 {
+                self.second = Some(t);
+            }
             self.dirty = true;
             let period = Duration::from_secs_f64(1.0 / self.fps());
             self.next_step = (self.next_step + period).max(Instant::now() - period);
@@ -259,11 +275,23 @@ impl App {
         true
     }
 
-    /// Runs the panel and presents; the window's image when `capture`.
+    /// Runs the panel when it is due, and presents; the window's image when `capture`.
     fn run_panel(&mut self, capture: bool) -> Option<image::RgbImage> {
-        let (Some(display), Some(state)) = (self.display.as_mut(), self.egui_state.as_mut()) else {
+        let at = self.panel.view_rect;
+        let display = self.display.as_mut()?;
+        let due = capture
+            || self.ui_input
+            || !self.panel.playing
+            || self.session.problem().is_some()
+            || self.last_ui.is_none_or(|t| t.elapsed() >= PANEL_PERIOD)
+            || !display.can_reuse_panel(at);
+        if !due {
+            if let Err(e) = display.present(None, at, false) {
+                self.exit = Some(Err(e));
+            }
             return None;
-        };
+        }
+        let state = self.egui_state.as_mut()?;
         let input = state.take_egui_input(&display.window);
         let view = display.view_texture().map(|v| (v.id, v.size));
         let mut out = PanelOut::default();
@@ -278,16 +306,18 @@ impl App {
             );
         });
         state.handle_platform_output(&display.window, full.platform_output);
-        let ppp = full.pixels_per_point;
-        let jobs = self.egui.tessellate(full.shapes, ppp);
-        let at = self.panel.view_rect;
-        let shot = match display.present(&jobs, &full.textures_delta, ppp, at, capture) {
-            Ok(s) => s,
-            Err(e) => {
-                self.exit = Some(Err(e));
-                None
-            }
+        let jobs = self.egui.tessellate(full.shapes, full.pixels_per_point);
+        let ui = UiFrame {
+            jobs: &jobs,
+            textures: &full.textures_delta,
+            pixels_per_point: full.pixels_per_point,
+            over_view: self.session.problem().is_some(),
         };
+        let shot = display.present(Some(ui), at, capture).unwrap_or_else(|e| {
+            self.exit = Some(Err(e));
+            None
+        });
+        (self.ui_input, self.last_ui) = (false, Some(Instant::now()));
         self.after_panel(out);
         shot
     }
@@ -346,9 +376,12 @@ impl App {
         if t.frames > 0 {
             let wall = self.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
             let n = t.frames as f64;
+            let steady = self.second.map_or(0.0, |s| {
+                (t.frames - 1) as f64 / s.elapsed().as_secs_f64().max(1e-9)
+            });
             say(&format!(
-                "view: {} frames in {wall:.2} s ({:.1} fps); per frame: sim {:.2} ms, draw \
-                 {:.2} ms, ui {:.2} ms",
+                "view: {} frames in {wall:.2} s ({:.1} fps; {steady:.1} fps after the first); \
+                 per frame: sim {:.2} ms, draw {:.2} ms, ui {:.2} ms",
                 t.frames,
                 n / wall.max(1e-9),
                 t.sim_ms / n,
@@ -411,6 +444,7 @@ impl ApplicationHandler for App {
         if let (Some(d), Some(s)) = (&self.display, &mut self.egui_state)
             && s.on_window_event(&d.window, &event).repaint
         {
+            self.ui_input |= !matches!(event, WindowEvent::RedrawRequested);
             d.window.request_redraw();
         }
         match event {

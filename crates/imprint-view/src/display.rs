@@ -34,6 +34,18 @@ pub struct Display {
     ui: Renderer,
     scene: GpuRenderer,
     route: Route,
+    /// The panel drawn last, copied into the frames that do not run the UI again.
+    panel: Option<wgpu::Texture>,
+}
+
+/// One run of the UI, to draw.
+pub struct UiFrame<'a> {
+    pub jobs: &'a [egui::ClippedPrimitive],
+    pub textures: &'a egui::TexturesDelta,
+    pub pixels_per_point: f32,
+    /// Something is drawn over the 3D view (the problem box): the UI is drawn onto the
+    /// window after the view, not kept.
+    pub over_view: bool,
 }
 
 impl Display {
@@ -99,6 +111,7 @@ impl Display {
             ui: Renderer::new(&gpu.device, format, options),
             scene,
             route,
+            panel: None,
         })
     }
 
@@ -153,25 +166,16 @@ impl Display {
 
     /// Uploads the UI's textures and draws `jobs` to the window; with `capture`, also into an
     /// image of the window read back.
-    /// The view is copied to `view_at` (pixels) first, when it is copied.
+    /// Presents a frame: the panel drawn anew from `ui`, or, with `None`, the panel drawn
+    /// last copied again ([`Display::can_reuse_panel`]); the 3D view copied to `view_at`
+    /// (pixels) where it is copied. With `capture`, also the window's image read back.
     pub fn present(
         &mut self,
-        jobs: &[egui::ClippedPrimitive],
-        textures: &egui::TexturesDelta,
-        pixels_per_point: f32,
+        ui: Option<UiFrame<'_>>,
         view_at: Option<[u32; 4]>,
         capture: bool,
     ) -> Result<Option<RgbImage>, ViewError> {
-        let (device, queue) = (&self.gpu.device, self.gpu.queue.uncounted());
-        for (id, deltas) in &textures.set {
-            for delta in deltas {
-                self.ui.update_texture(device, queue, *id, delta);
-            }
-        }
-        let screen = ScreenDescriptor {
-            size_in_pixels: self.size(),
-            pixels_per_point,
-        };
+        let device = &self.gpu.device;
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f)
             | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
@@ -182,28 +186,121 @@ impl Display {
                 return Ok(None);
             }
         };
-        let target = frame.texture.create_view(&Default::default());
         let mut encoder = device.create_command_encoder(&Default::default());
-        let mut commands = self
-            .ui
-            .update_buffers(device, queue, &mut encoder, jobs, &screen);
-        let covered = self.copy_view(&mut encoder, &frame.texture, view_at);
-        self.ui_pass(&mut encoder, &target, jobs, &screen, covered);
-        let shot = if capture {
-            Some(self.capture(&mut encoder, jobs, &screen, view_at)?)
-        } else {
-            None
-        };
+        let mut commands = Vec::new();
+        let mut shot = None;
+        match ui {
+            Some(ui) => {
+                commands = self.prepare_ui(&mut encoder, &ui);
+                let screen = self.screen(ui.pixels_per_point);
+                let keep_panel = !ui.over_view && !capture && self.copied(view_at);
+                if keep_panel {
+                    let panel = self.panel_image()?;
+                    let view = panel.create_view(&Default::default());
+                    self.ui_pass(&mut encoder, &view, ui.jobs, &screen, false);
+                    self.compose(&mut encoder, &frame.texture, view_at);
+                } else {
+                    self.panel = None;
+                    let target = frame.texture.create_view(&Default::default());
+                    let covered = self.copy_view(&mut encoder, &frame.texture, view_at);
+                    self.ui_pass(&mut encoder, &target, ui.jobs, &screen, covered);
+                    if capture {
+                        shot = Some(self.capture(&mut encoder, ui.jobs, &screen, view_at)?);
+                    }
+                }
+                for id in &ui.textures.free {
+                    self.ui.free_texture(id);
+                }
+            }
+            None => {
+                self.compose(&mut encoder, &frame.texture, view_at);
+            }
+        }
         commands.push(encoder.finish());
         self.gpu.queue.submit(commands);
-        queue.present(frame);
-        for id in &textures.free {
-            self.ui.free_texture(id);
-        }
+        self.gpu.queue.uncounted().present(frame);
         match shot {
             Some((texture, readback)) => Ok(Some(self.read(&texture, readback)?)),
             None => Ok(None),
         }
+    }
+
+    /// Whether a frame can be presented without running the UI: the panel drawn last is kept
+    /// and the view, copied, fills the rest of the window.
+    pub fn can_reuse_panel(&self, view_at: Option<[u32; 4]>) -> bool {
+        self.panel.is_some() && self.copied(view_at)
+    }
+
+    fn screen(&self, pixels_per_point: f32) -> ScreenDescriptor {
+        ScreenDescriptor {
+            size_in_pixels: self.size(),
+            pixels_per_point,
+        }
+    }
+
+    /// Uploads the UI's textures and buffers; the commands its callbacks made.
+    fn prepare_ui(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        ui: &UiFrame<'_>,
+    ) -> Vec<wgpu::CommandBuffer> {
+        let (device, queue) = (&self.gpu.device, self.gpu.queue.uncounted());
+        for (id, deltas) in &ui.textures.set {
+            for delta in deltas {
+                self.ui.update_texture(device, queue, *id, delta);
+            }
+        }
+        let screen = self.screen(ui.pixels_per_point);
+        self.ui
+            .update_buffers(device, queue, encoder, ui.jobs, &screen)
+    }
+
+    /// The image the panel is drawn into when it is kept, made at the window's size.
+    fn panel_image(&mut self) -> Result<wgpu::Texture, ViewError> {
+        let [w, h] = self.size();
+        if let Some(p) = self
+            .panel
+            .as_ref()
+            .filter(|p| p.width() == w && p.height() == h)
+        {
+            return Ok(p.clone());
+        }
+        let usage = wgpu::TextureUsages::COPY_SRC;
+        let made = render_texture(self.gpu, "viewer panel", w, h, self.config.format, 1, usage)
+            .map_err(|e| ViewError::failed(format!("the panel's image: {e}")))?;
+        self.panel = Some(made.clone());
+        Ok(made)
+    }
+
+    /// The kept panel (left of the view) and the 3D view, copied into `window`.
+    fn compose(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        window: &wgpu::Texture,
+        view_at: Option<[u32; 4]>,
+    ) {
+        let (Some(panel), Some([x, _, _, _])) = (&self.panel, view_at) else {
+            return;
+        };
+        if x > 0 {
+            let size = wgpu::Extent3d {
+                width: x,
+                height: panel.height(),
+                depth_or_array_layers: 1,
+            };
+            encoder.copy_texture_to_texture(panel.as_image_copy(), window.as_image_copy(), size);
+        }
+        self.copy_view(encoder, window, view_at);
+    }
+
+    /// Whether the view is copied into the window and fills it right of the panel.
+    fn copied(&self, view_at: Option<[u32; 4]>) -> bool {
+        let (Route::Copy { image: Some(image) }, Some([x, y, w, h])) = (&self.route, view_at)
+        else {
+            return false;
+        };
+        let [ww, wh] = self.size();
+        image.width() == w && image.height() == h && x + w == ww && y == 0 && h == wh
     }
 
     fn ui_pass(
@@ -247,13 +344,10 @@ impl Display {
         window: &wgpu::Texture,
         view_at: Option<[u32; 4]>,
     ) -> bool {
-        let (Route::Copy { image: Some(image) }, Some([x, y, w, h])) = (&self.route, view_at)
-        else {
+        let (Route::Copy { image: Some(image) }, Some([x, y, ..])) = (&self.route, view_at) else {
             return false;
         };
-        let [ww, wh] = self.size();
-        let fits = image.width() == w && image.height() == h && x + w == ww && y + h == wh;
-        if !fits {
+        if !self.copied(view_at) {
             return false;
         }
         encoder.copy_texture_to_texture(
