@@ -150,7 +150,13 @@ fn offline_run(root: &Path) -> f64 {
     let out = std::env::temp_dir().join("imprint-bench-view-offline");
     let t = std::time::Instant::now();
     let status = Command::new(root.join("target/release/imprint"))
-        .args(["run", "pipelines/amortised_cloth.ron", "--frames", "0..48", "--out"])
+        .args([
+            "run",
+            "pipelines/amortised_cloth.ron",
+            "--frames",
+            "0..48",
+            "--out",
+        ])
         .arg(&out)
         .current_dir(root)
         .stdout(std::process::Stdio::null())

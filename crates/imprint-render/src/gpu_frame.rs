@@ -452,19 +452,7 @@ impl GpuRenderer {
         target.readback.copy(&mut encoder, &target.resolved);
         ctx.queue.submit([encoder.finish()]);
         let rgba = target.readback.read(ctx)?;
-        let bgra = self.format == wgpu::TextureFormat::Bgra8UnormSrgb;
-        let rgb: Vec<u8> = rgba
-            .chunks_exact(4)
-            .flat_map(|p| {
-                if bgra {
-                    [p[2], p[1], p[0]]
-                } else {
-                    [p[0], p[1], p[2]]
-                }
-            })
-            .collect();
-        RgbImage::from_raw(opts.width, opts.height, rgb)
-            .ok_or_else(|| Error::Gpu("frame readback has the wrong size".into()))
+        rgb_image(&rgba, self.format, opts.width, opts.height)
     }
 
     /// [`GpuRenderer::render`] without the read-back, for a live view that shows the image
@@ -693,4 +681,32 @@ impl GpuRenderer {
         }
         Ok(encoder)
     }
+}
+
+/// An image read back from a texture of `format` (8-bit RGBA or BGRA, tightly packed), as
+/// RGB.
+pub fn rgb_image(
+    bytes: &[u8],
+    format: wgpu::TextureFormat,
+    width: u32,
+    height: u32,
+) -> Result<RgbImage> {
+    use wgpu::TextureFormat::{Bgra8Unorm, Bgra8UnormSrgb};
+    let bgra = matches!(format, Bgra8Unorm | Bgra8UnormSrgb);
+    let rgb: Vec<u8> = bytes
+        .chunks_exact(4)
+        .flat_map(|p| {
+            if bgra {
+                [p[2], p[1], p[0]]
+            } else {
+                [p[0], p[1], p[2]]
+            }
+        })
+        .collect();
+    RgbImage::from_raw(width, height, rgb).ok_or_else(|| {
+        Error::Gpu(format!(
+            "a read-back of {} bytes is not a {width}x{height} image",
+            bytes.len()
+        ))
+    })
 }

@@ -396,22 +396,7 @@ impl Display {
     ) -> Result<RgbImage, ViewError> {
         let fail = |e: imprint_core::Error| ViewError::failed(format!("screenshot: {e}"));
         let rgba = readback.read(self.gpu).map_err(fail)?;
-        let bgr = matches!(
-            self.config.format,
-            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
-        );
-        let rgb: Vec<u8> = rgba
-            .chunks_exact(4)
-            .flat_map(|p| {
-                if bgr {
-                    [p[2], p[1], p[0]]
-                } else {
-                    [p[0], p[1], p[2]]
-                }
-            })
-            .collect();
         let [w, h] = self.size();
-        RgbImage::from_raw(w, h, rgb)
-            .ok_or_else(|| ViewError::failed("screenshot: read-back of the wrong size"))
+        imprint_render::gpu_frame::rgb_image(&rgba, self.config.format, w, h).map_err(fail)
     }
 }
