@@ -288,3 +288,55 @@ pub fn bounds(ex: &Executor, objects: &[ViewObject]) -> Option<Aabb> {
     }
     b
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{UVec2, Vec2};
+
+    #[test]
+    fn heights_coloured_by_height_split_into_bands_that_keep_every_triangle() {
+        // A ramp from 0 to 1.1 along x: every band gets triangles, lowest band lowest.
+        let dims = UVec2::new(24, 4);
+        let heights = (0..dims.y)
+            .flat_map(|_| (0..dims.x).map(|x| x as f32 * 1.1 / 23.0))
+            .collect();
+        let h = HeightField::new(Vec2::ZERO, 0.1, dims, heights).unwrap();
+        let look = Look::Heights {
+            color: [1.0; 3],
+            wireframe: false,
+            by_height: true,
+        };
+        let (objects, legend) = height_objects("ground", &look, &h);
+        let legend = legend.unwrap();
+        assert_eq!((legend.min, legend.max), (0.0, 1.1));
+        assert_eq!(legend.colors.len(), BANDS);
+        assert_eq!(objects.len(), BANDS);
+        let triangles: Vec<&Mesh> = objects
+            .iter()
+            .map(|o| match o {
+                Object::Mesh { mesh, .. } => mesh.as_ref(),
+                _ => panic!("bands are meshes"),
+            })
+            .collect();
+        let total: usize = triangles.iter().map(|m| m.triangles.len()).sum();
+        assert_eq!(total, h.to_mesh().triangles.len());
+        let mean_y = |m: &Mesh| {
+            let ys = m
+                .triangles
+                .iter()
+                .flatten()
+                .map(|&i| m.positions[i as usize].y);
+            ys.sum::<f32>() / (3 * m.triangles.len()) as f32
+        };
+        assert!(mean_y(triangles[0]) < mean_y(triangles[BANDS - 1]));
+        // One colour when not coloured by height, and no legend.
+        let plain = Look::Heights {
+            color: [1.0; 3],
+            wireframe: false,
+            by_height: false,
+        };
+        let (objects, legend) = height_objects("ground", &plain, &h);
+        assert_eq!((objects.len(), legend), (1, None));
+    }
+}
