@@ -34,7 +34,7 @@ mod sweep;
 #[derive(Parser)]
 #[command(
     name = "imprint",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (git ", env!("IMPRINT_GIT_REV"), ")"),
     about = "How deforming bodies touch soft things: distance fields, cloth, snow, ground"
 )]
 struct Cli {
@@ -82,6 +82,7 @@ enum Command {
         /// Frames to run, `A..B` (B exclusive) or `A..=B`.
         #[arg(long, value_parser = parse_frames)]
         frames: Option<Range<u32>>,
+        /// Override a node's field: NODE.FIELD=VALUE (VALUE in RON), repeatable.
         #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
         sets: Vec<String>,
         /// Size of the 3D view, WxH pixels (default: the Render node's image, else 960x540).
@@ -141,17 +142,27 @@ enum Command {
         /// The Cloth node (default: the pipeline's only one).
         #[arg(long)]
         node: Option<String>,
-        /// Stiffness multipliers (rows).
-        #[arg(long, value_delimiter = ',', default_values_t = [1.0, 10.0, 100.0, 1000.0])]
+        /// Stiffness multipliers (rows), comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "1,10,100,1000")]
         scales: Vec<f32>,
-        /// Substep / estimated critical substep (columns).
-        #[arg(long, value_delimiter = ',', default_values_t = [0.5, 0.75, 0.9, 1.1, 1.25, 1.5, 2.0])]
+        /// Substep / estimated critical substep (columns), comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "0.5,0.75,0.9,1.1,1.25,1.5,2"
+        )]
         ratios: Vec<f32>,
         /// Frames each cell runs.
         #[arg(long, default_value_t = 12)]
         frames: u32,
         #[arg(long = "set", value_name = "NODE.FIELD=VALUE")]
         sets: Vec<String>,
+    },
+    /// Print a completion script for a shell, e.g. `imprint completions bash >
+    /// ~/.local/share/bash-completion/completions/imprint`.
+    Completions {
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
     },
 }
 
@@ -216,6 +227,14 @@ fn parse_size(s: &str) -> Result<[u32; 2], String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Before anything else runs, while this is the only thread (see `quiet_display_probe`).
+    quiet_display_probe();
+    let code = run_command(cli);
+    remove_runtime_dir();
+    code
+}
+
+fn run_command(cli: Cli) -> ExitCode {
     if let Command::View { .. } = cli.command {
         return view(cli.command);
     }
@@ -226,6 +245,49 @@ fn main() -> ExitCode {
             ExitCode::from(e.exit_code() as u8)
         }
     }
+}
+
+/// The runtime folder [`quiet_display_probe`] made, removed on the way out ([`exit`]).
+static RUNTIME_DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Gives the process a private, empty `XDG_RUNTIME_DIR` when it has none (or one that is
+/// not an absolute path, which libwayland rejects alike), removed when the program ends.
+///
+/// Creating a Vulkan instance runs Mesa's device-select layer, which asks the Wayland
+/// display (`wl_display_connect`) which GPU drives the screen; without a runtime folder
+/// libwayland prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." to
+/// stderr, on every run, though nothing is wrong (a headless machine, a container, `sudo`,
+/// a cron job). With a folder that holds no display socket the probe fails quietly, as it
+/// does on a desktop without Wayland. A session that has a runtime folder keeps it.
+fn quiet_display_probe() {
+    let key = "XDG_RUNTIME_DIR";
+    if std::env::var_os(key).is_some_and(|d| Path::new(&d).is_absolute()) {
+        return;
+    }
+    // Mode 0700 and a random name: no other user can place a socket in it.
+    let Ok(dir) = tempfile::Builder::new()
+        .prefix("imprint-runtime-")
+        .tempdir()
+    else {
+        return;
+    };
+    let dir = dir.keep();
+    // SAFETY: called first thing in `main` after parsing the arguments, before this
+    // process starts any thread, so nothing reads or writes the environment concurrently.
+    unsafe { std::env::set_var(key, &dir) };
+    let _ = RUNTIME_DIR.set(dir);
+}
+
+fn remove_runtime_dir() {
+    if let Some(dir) = RUNTIME_DIR.get() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+/// Ends the program at once with `code`, removing the runtime folder first.
+fn exit(code: i32) -> ! {
+    remove_runtime_dir();
+    std::process::exit(code)
 }
 
 /// `imprint view`: its own exit codes (see `imprint_view::ViewError`).
@@ -272,10 +334,10 @@ pub(crate) fn emit(text: std::fmt::Arguments) {
     let mut stdout = std::io::stdout().lock();
     if let Err(e) = stdout.write_fmt(text).and_then(|_| stdout.flush()) {
         if e.kind() == std::io::ErrorKind::BrokenPipe {
-            std::process::exit(0);
+            exit(0);
         }
         eprintln!("error: cannot write to standard output: {e}");
-        std::process::exit(1);
+        exit(1);
     }
 }
 
@@ -335,6 +397,13 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             Ok(())
         }
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "imprint", &mut script);
+            out!("{}", String::from_utf8_lossy(&script));
+            Ok(())
+        }
         Command::View { .. } => unreachable!("main() runs `view` with its own exit codes"),
         Command::Stress {
             what: StressWhat::Cloth,
@@ -467,7 +536,7 @@ fn stop_on_signal() -> Arc<AtomicBool> {
     // A second signal ends the program at once.
     let handler = move || {
         if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
+            exit(130);
         }
     };
     if let Err(e) = ctrlc::set_handler(handler) {

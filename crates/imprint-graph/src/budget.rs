@@ -613,7 +613,7 @@ mod tests {
     fn a_field_of_a_simulated_mesh_splits_without_interpolating() {
         let text = text("harada_cloth.ron").replace(
             "\"render\":",
-            r#""cv": Voxelize(mesh: "cloth", grid: Fit(resolution: 32)),
+            r#""cv": Voxelize(mesh: "cloth", grid: Explicit(origin: (-0.8, 0, -0.8), cell: 0.05, dims: (33, 33, 33))),
         "cf": DistanceField(boundary: "cv"),
         "w": WriteField(field: "cf"),
         "render":"#,

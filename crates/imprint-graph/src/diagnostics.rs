@@ -98,9 +98,12 @@ impl Source {
             return node;
         }
         let rest = &self.text[node.end..];
-        // The node's body ends at the next node key at the same level; a cheap bound is the
-        // next `"...":` after this one.
-        let limit = rest.find("\",").map_or(rest.len(), |i| i);
+        // Within the node's body: from its `Kind(` to the matching `)` (strings and comments
+        // skipped), so a field after a string value (`mesh: "m", grid: …`) is found.
+        let limit = rest
+            .find('(')
+            .and_then(|open| crate::overrides::matching_close(&self.text, node.end + open).ok())
+            .map_or(rest.len(), |close| close - node.end);
         let pat = format!("{field}:");
         let mut from = 0;
         while let Some(i) = rest[from..limit.max(from)].find(&pat) {
@@ -135,14 +138,46 @@ pub fn ron_error(src: &Source, e: &ron::error::SpannedError) -> PipelineError {
     }
     let message = e.code.to_string();
     let help = if message.contains("unknown variant") || message.contains("Unexpected variant") {
-        Some(
-            "node kinds are: Mesh, Voxelize, DistanceField, WriteField, WriteMesh, Render (see README: writing a pipeline)"
-                .to_string(),
-        )
+        // RON names the enum: only a node's kind gets the list of node kinds (a camera's or
+        // a motion's variant is listed by the message itself).
+        Some(if message.contains("`NodeSpec`") {
+            format!(
+                "node kinds are: {} (see README: writing a pipeline)",
+                crate::schema::NodeSpec::KINDS.join(", ")
+            )
+        } else {
+            "check the spelling against the README's pipeline reference".to_string()
+        })
     } else if message.contains("Unexpected field") || message.contains("unknown field") {
         Some("check the field's spelling against the README's pipeline reference".to_string())
     } else {
         None
     };
     src.error(start..end, message, "here", help)
+}
+
+#[cfg(test)]
+mod field_span_tests {
+    use super::Source;
+
+    #[test]
+    fn a_field_after_a_string_value_is_found_in_its_own_node_only() {
+        let text = r#"Pipeline(frames: 2, nodes: {
+    "top": Heightmap(
+        mesh: "m", // "quoted", in a comment
+        grid: Fit(resolution: 0),
+    ),
+    "other": Heightmap(mesh: "m", every: 3, grid: Fit(resolution: 8)),
+})"#;
+        let src = Source {
+            name: "p.ron".into(),
+            text: text.into(),
+        };
+        let span = src.field_span("top", "grid");
+        assert_eq!(&text[span.clone()], "grid: Fit(resolution: 0");
+        assert_eq!(src.line_col(span.start), (4, 9));
+        // A field the node does not set is not taken from the next node.
+        let span = src.field_span("top", "every");
+        assert_eq!(span, src.node_span("top"));
+    }
 }

@@ -112,6 +112,11 @@ pub trait Node: Any {
     fn swept_bounds(&self, _ctx: &CheckCtx<'_>) -> imprint_core::Result<Option<Aabb>> {
         Ok(None)
     }
+    /// Whether [`Node::swept_bounds`] gives the box before running (it then returns `Some`):
+    /// a `Fit` grid over this node's output needs it, and `check` refuses one where it is not.
+    fn swept_bounds_known(&self) -> bool {
+        false
+    }
     /// Value ranges and assets, checked before anything runs.
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()>;
     /// What the user should know before running (after `check` passed): e.g. a substep
@@ -239,6 +244,38 @@ impl CheckCtx<'_> {
                 Some("paths are relative to the pipeline file's folder".into()),
             )
             .into())
+    }
+
+    /// A `Fit` grid (field `field`) over the output of node `mesh`: refused before running
+    /// unless that node knows the box it sweeps over the run up front (a Mesh node), as the
+    /// run could not fit the grid. `explicit` is the kind's `Explicit` grid as the file
+    /// writes it, and `origin` what its origin is, for the fix.
+    pub fn fit_needs_swept_box(
+        &self,
+        field: &str,
+        mesh: &str,
+        explicit: &str,
+        origin: &str,
+    ) -> crate::Result<()> {
+        // An input that names no node is the plan's error, reported before this.
+        let Some(node) = (self.lookup)(mesh) else {
+            return Ok(());
+        };
+        if node.swept_bounds_known() {
+            return Ok(());
+        }
+        Err(self.fail_with(
+            field,
+            format!(
+                "Fit needs the box '{mesh}' sweeps over the run before running, and '{mesh}' \
+                 is a {} node, computed frame by frame",
+                node.kind()
+            ),
+            Some(format!(
+                "give the grid explicitly, covering the box '{mesh}' stays in: \
+                 grid: {explicit} ({origin}); Fit works on the output of a Mesh node"
+            )),
+        ))
     }
 
     /// Node `name` of the file, downcast to its kind's type.

@@ -112,7 +112,8 @@ fn scan(text: &str, from: usize, to: usize, mut visit: impl FnMut(usize, char, i
     }
 }
 
-fn matching_close(text: &str, open: usize) -> Result<usize> {
+/// The `)` closing the `(` at byte `open`, outside strings and comments.
+pub(crate) fn matching_close(text: &str, open: usize) -> Result<usize> {
     let mut close = None;
     scan(text, open, text.len(), |i, c, depth| {
         if depth == 0 && c == ')' {

@@ -31,8 +31,9 @@ fn default_fps() -> f32 {
     30.0
 }
 
-/// Declares [`NodeSpec`], one variant per node kind with the type of its fields, and its one
-/// dispatch to the kind's module ([`NodeSpec::node`]).
+/// Declares [`NodeSpec`], one variant per node kind with the type of its fields, its one
+/// dispatch to the kind's module ([`NodeSpec::node`]) and the list of kinds
+/// ([`NodeSpec::KINDS`]).
 macro_rules! node_kinds {
     ($($(#[$doc:meta])* $kind:ident($spec:ty),)*) => {
         /// A node of the file: its kind and fields.
@@ -42,6 +43,10 @@ macro_rules! node_kinds {
         }
 
         impl NodeSpec {
+            /// Every node kind, as the file spells it, in this list's order (for messages:
+            /// generated here, so it cannot fall behind the kinds).
+            pub const KINDS: &'static [&'static str] = &[$(stringify!($kind),)*];
+
             /// The node's module: the one dispatch on the kind.
             pub fn node(&self) -> &dyn Node {
                 match self {

@@ -4,6 +4,7 @@
 
 use crate::node::Trigger;
 use crate::plan::Plan;
+use crate::schema::{CameraSpec, NodeSpec};
 use std::collections::{BTreeMap, BTreeSet};
 
 impl Plan {
@@ -106,6 +107,18 @@ impl Plan {
         for name in &self.order {
             let sc = nodes[name].schedule();
             let what = match (sc.interpolate, sc.split, sc.every) {
+                // A writer writes on each of its keyframes, whatever its inputs do.
+                _ if nodes[name].is_writer() => {
+                    let every = match sc.every {
+                        1 => String::new(),
+                        k => format!("every {k}, offset {}; ", sc.offset),
+                    };
+                    match (statics.contains(name), camera_spins(&nodes[name])) {
+                        (_, true) => format!("{every}moves with time: its camera spins"),
+                        (true, false) => format!("{every}inputs static: the same each write"),
+                        (false, false) => every.trim_end_matches("; ").to_string(),
+                    }
+                }
                 _ if statics.contains(name) => "static: computes once".to_string(),
                 (true, s, k) => format!("every {k}, split {s}, interpolated (built {k} ahead)"),
                 (false, s, k) if s > 1 => format!("every {k}, split {s} (ready {} later)", s - 1),
@@ -117,6 +130,13 @@ impl Plan {
         s += "# computes, 1-9 part of a split build, w writes, . reuses (interpolated: blends)\n";
         s
     }
+}
+
+/// Whether a node's output changes with time when its inputs do not: a Render whose orbit
+/// camera spins.
+fn camera_spins(spec: &NodeSpec) -> bool {
+    matches!(spec, NodeSpec::Render(r)
+        if matches!(r.camera, CameraSpec::Orbit { spin, .. } if spin != 0.0))
 }
 
 fn part_char(p: u32) -> char {

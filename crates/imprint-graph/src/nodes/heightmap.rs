@@ -57,6 +57,10 @@ pub enum HeightGrid {
     },
 }
 
+/// The `Explicit` grid as a file writes it, for messages.
+const HEIGHT_EXPLICIT: &str = "Explicit(origin: (x, z), cell: size, dims: (nx, nz))";
+const HEIGHT_ORIGIN: &str = "origin is the (x, z) centre of cell (0, 0)";
+
 impl Node for HeightmapNode {
     fn kind(&self) -> &'static str {
         "Heightmap"
@@ -109,6 +113,7 @@ impl Node for HeightmapNode {
                         ctx.fail("empty", format!("empty must be finite, got {}", self.empty))
                     );
                 }
+                ctx.fit_needs_swept_box("grid", &self.mesh, HEIGHT_EXPLICIT, HEIGHT_ORIGIN)?;
             }
             HeightGrid::Explicit { .. } => {
                 self.region(None).map_err(|e| ctx.fail("grid", e))?;

@@ -39,6 +39,9 @@ impl Node for MeshParams {
         let src = MeshSource::new(self, ctx.base_dir)?;
         Ok(Some(swept(&src, ctx.frames, ctx.fps)))
     }
+    fn swept_bounds_known(&self) -> bool {
+        true
+    }
     fn check(&self, ctx: &CheckCtx<'_>) -> crate::Result<()> {
         self.validate().map_err(|e| ctx.fail("motion", e))?;
         if let Some(p) = &self.path {

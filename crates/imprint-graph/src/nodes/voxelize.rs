@@ -85,6 +85,10 @@ impl VoxelizeNode {
     }
 }
 
+/// The `Explicit` grid as a file writes it, for messages.
+const VOXEL_EXPLICIT: &str = "Explicit(origin: (x, y, z), cell: size, dims: (nx, ny, nz))";
+const VOXEL_ORIGIN: &str = "origin is the centre of cell (0, 0, 0)";
+
 impl Node for VoxelizeNode {
     fn kind(&self) -> &'static str {
         "Voxelize"
@@ -136,6 +140,7 @@ impl Node for VoxelizeNode {
                         format!("grid padding must be finite and >= 0, got {padding}"),
                     ));
                 }
+                ctx.fit_needs_swept_box("grid", &self.mesh, VOXEL_EXPLICIT, VOXEL_ORIGIN)?;
             }
             GridChoice::Explicit { origin, cell, dims } => {
                 let o = glam::Vec3::new(origin.0, origin.1, origin.2);
