@@ -29,6 +29,7 @@ macro_rules! outln {
     }};
 }
 
+mod log;
 mod sweep;
 
 #[derive(Parser)]
@@ -40,6 +41,13 @@ mod sweep;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// More messages on stderr: -v info, -vv debug, -vvv trace (IMPRINT_LOG, a filter as
+    /// RUST_LOG takes it, e.g. `warn,imprint_graph=debug`, overrides -v and -q).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    /// Errors only on stderr: no warnings, notes or progress bar.
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    quiet: bool,
 }
 
 #[derive(Subcommand)]
@@ -229,6 +237,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     // Before anything else runs, while this is the only thread (see `quiet_display_probe`).
     quiet_display_probe();
+    log::init(cli.verbose, cli.quiet);
     let code = run_command(cli);
     remove_runtime_dir();
     code
@@ -540,7 +549,7 @@ fn stop_on_signal() -> Arc<AtomicBool> {
         }
     };
     if let Err(e) = ctrlc::set_handler(handler) {
-        eprintln!("warning: Ctrl-C will end the run without its report: {e}");
+        tracing::warn!("Ctrl-C will end the run without its report: {e}");
     }
     stop
 }
@@ -549,17 +558,19 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
     let out = opts.out.clone();
     let run = Run::start(plan, &opts)?;
     for w in run.warnings() {
-        eprintln!("warning: {w}");
+        tracing::warn!("{w}");
     }
     let said = run.warnings().len();
-    if let Some(c) = run.executor().report().resumed_at {
+    if let Some(c) = run.executor().report().resumed_at
+        && !log::quiet()
+    {
         eprintln!(
             "resuming at frame {c} from {}",
             out.join("checkpoint.bin").display()
         );
     }
     let bar = ProgressBar::new(0);
-    if std::io::stderr().is_terminal() {
+    if std::io::stderr().is_terminal() && !log::quiet() {
         bar.set_style(
             ProgressStyle::with_template(
                 "{spinner} frame {pos}/{len} [{bar:30}] {elapsed} ETA {eta}",
@@ -570,6 +581,7 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
     } else {
         bar.set_draw_target(ProgressDrawTarget::hidden());
     }
+    let drawing = log::drawing(&bar);
     let report = run.finish(
         &mut |done, total| {
             bar.set_length(total as u64);
@@ -577,10 +589,11 @@ fn run_plan(plan: &Plan, opts: RunOptions) -> imprint_graph::Result<()> {
         },
         None,
     )?;
+    drop(drawing);
     bar.finish_and_clear();
     // What the stages' self-checks counted while running (each kind once).
     for w in report.warnings.iter().skip(said) {
-        eprintln!("warning: {w}");
+        tracing::warn!("{w}");
     }
     outln!("{}", report.table(&plan.order));
     outln!(

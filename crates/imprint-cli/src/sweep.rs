@@ -597,12 +597,23 @@ struct Table {
     rows: Vec<Vec<Cell>>,
 }
 
-fn csv_escape(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
+/// Records as CSV text through the `csv` crate: `\n` line ends, a field quoted only when it
+/// holds a comma, a quote or a newline (quotes inside doubled), as RFC 4180 readers expect.
+fn csv_text<R, F>(records: impl IntoIterator<Item = R>) -> String
+where
+    R: IntoIterator<Item = F>,
+    F: AsRef<[u8]>,
+{
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .quote_style(csv::QuoteStyle::Necessary)
+        .from_writer(Vec::new());
+    for record in records {
+        // Writing into memory fails only on a record of a different length: a bug here.
+        w.write_record(record).expect("CSV records of one length");
     }
+    let bytes = w.into_inner().expect("CSV written to memory");
+    String::from_utf8(bytes).expect("CSV of UTF-8 fields is UTF-8")
 }
 
 /// About four significant digits.
@@ -619,21 +630,18 @@ fn short_number(v: f64) -> String {
 
 impl Table {
     fn csv(&self) -> String {
-        let mut s = self.headers.join(",") + "\n";
-        for row in &self.rows {
-            let cells: Vec<String> = row
-                .iter()
+        let body = self.rows.iter().map(|row| {
+            row.iter()
                 .map(|c| match c {
-                    Cell::Text(t) => csv_escape(t),
+                    Cell::Text(t) => t.clone(),
                     Cell::Ms(v) => format!("{v:.3}"),
                     Cell::Count(n) => n.to_string(),
                     Cell::Error(v) => format!("{v:.6e}"),
                     Cell::Empty => String::new(),
                 })
-                .collect();
-            s += &(cells.join(",") + "\n");
-        }
-        s
+                .collect::<Vec<String>>()
+        });
+        csv_text(std::iter::once(self.headers.clone()).chain(body))
     }
 
     fn markdown(&self) -> String {
@@ -742,19 +750,26 @@ fn results_table(
 
 /// `sweep_frames.csv`: every setting's error per node per frame.
 fn frames_csv(rows: &[Row]) -> String {
-    let mut s = String::from("setting,node,frame,probes,mean,rms,max\n");
-    for r in rows {
-        for (node, frames) in &r.errors {
-            for f in frames {
+    let header = ["setting", "node", "frame", "probes", "mean", "rms", "max"].map(String::from);
+    let body = rows.iter().flat_map(|r| {
+        r.errors.iter().flat_map(move |(node, frames)| {
+            frames.iter().map(move |f| {
                 let stats = f.stats().map_or_else(
-                    || ",,".to_string(),
-                    |[a, b, c]| format!("{a:.6e},{b:.6e},{c:.6e}"),
+                    || [(); 3].map(|_| String::new()),
+                    |v| v.map(|x| format!("{x:.6e}")),
                 );
-                s += &format!("{},{node},{},{},{stats}\n", r.id, f.frame, f.n);
-            }
-        }
-    }
-    s
+                let mut record = vec![
+                    r.id.clone(),
+                    node.clone(),
+                    f.frame.to_string(),
+                    f.n.to_string(),
+                ];
+                record.extend(stats);
+                record
+            })
+        })
+    });
+    csv_text(std::iter::once(header.to_vec()).chain(body))
 }
 
 fn markdown(
@@ -844,10 +859,35 @@ mod tests {
 
     #[test]
     fn numbers_and_text_are_escaped_per_format() {
-        assert_eq!(csv_escape("(1, 2)"), "\"(1, 2)\"");
-        assert_eq!(csv_escape("a\"b"), "\"a\"\"b\"");
+        assert_eq!(
+            csv_text([["(1, 2)", "a\"b", "plain", ""]]),
+            "\"(1, 2)\",\"a\"\"b\",plain,\n"
+        );
         assert_eq!(short_number(0.0123456), "0.01235");
         assert_eq!(short_number(123.456), "123.5");
         assert_eq!(short_number(1.5e-6), "1.500e-6");
+    }
+
+    #[test]
+    fn csv_fields_with_commas_quotes_and_newlines_round_trip() {
+        let records = vec![
+            vec![
+                "setting".to_string(),
+                "cloth.params.offsets".into(),
+                "status".into(),
+            ],
+            vec!["s1".into(), "(1, 2)".into(), "ok".into()],
+            vec!["s2".into(), "say \"hi\", then\nleave".into(), String::new()],
+        ];
+        let text = csv_text(records.clone());
+        assert!(text.ends_with('\n') && !text.contains('\r'));
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .from_reader(text.as_bytes());
+        let back: Vec<Vec<String>> = reader
+            .records()
+            .map(|r| r.unwrap().iter().map(String::from).collect())
+            .collect();
+        assert_eq!(back, records);
     }
 }

@@ -146,6 +146,12 @@ impl GpuContext {
             })
             .ok_or_else(|| Error::Gpu(NO_ADAPTER.into()))?;
         let adapter_info = adapter.get_info();
+        tracing::info!(
+            "GPU adapter: {} ({:?}, {:?})",
+            adapter_info.name,
+            adapter_info.backend,
+            adapter_info.device_type
+        );
         let limits = adapter.limits();
         // Timestamps are optional: only for timing, never for results.
         let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;

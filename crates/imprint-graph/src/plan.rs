@@ -2,7 +2,6 @@
 
 use crate::diagnostics::{Source, ron_error};
 use crate::node::CheckCtx;
-use crate::overrides::apply_override;
 use crate::schema::{PipelineFile, PortType};
 use crate::{Error, Result};
 use petgraph::algo::{kosaraju_scc, toposort};
@@ -28,29 +27,95 @@ pub struct Plan {
 }
 
 /// Reads, overrides (`NODE.FIELD=VALUE`) and validates a pipeline file.
+///
+/// The file is parsed first (its errors located in it); each override is then applied to the
+/// parsed value ([`crate::overrides::apply`]: its errors name the `--set` argument), and the
+/// nodes are checked. A check that fails only because of an override says so, naming it,
+/// rather than pointing at the file's text, which does not hold the value. The plan's
+/// [`Source`] text describes what runs (see [`described`]).
 pub fn load(path: &Path, overrides: &[String]) -> Result<Plan> {
-    let mut text = std::fs::read_to_string(path).map_err(|e| {
+    let text = std::fs::read_to_string(path).map_err(|e| {
         imprint_core::Error::Invalid(format!("cannot read pipeline file {}: {e}", path.display()))
     })?;
-    for o in overrides {
-        text = apply_override(&text, o)?;
-    }
     let base_dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    parse(
-        Source {
-            name: path.display().to_string(),
-            text,
-        },
-        &base_dir,
-    )
+    let source = Source {
+        name: path.display().to_string(),
+        text,
+    };
+    if overrides.is_empty() {
+        return parse(source, &base_dir);
+    }
+    let file = read_file(&source)?;
+    let edited = crate::overrides::apply(&file, overrides)?;
+    let mut plan = checked(source.clone(), edited, &base_dir).map_err(|e| {
+        // The file's own error (it fails without the overrides too) stays located in it.
+        match checked(source.clone(), file, &base_dir) {
+            Err(own) if own.to_string() == e.to_string() => own,
+            _ => from_overrides(&e, overrides),
+        }
+    })?;
+    plan.source.text = described(&source.text, overrides);
+    Ok(plan)
+}
+
+/// The text of what runs: the file with the overrides written into it (as the viewer writes
+/// its live edits back), so that it equals the file once they are; where a text edit cannot
+/// express one, the file with the overrides noted after it as comments. Plans are told apart
+/// by it (the viewer's reload, the sweep's cached reference).
+fn described(text: &str, overrides: &[String]) -> String {
+    overrides
+        .iter()
+        .try_fold(text.to_string(), |t, o| {
+            crate::overrides::apply_override(&t, o)
+        })
+        .unwrap_or_else(|_| {
+            let mut noted = text.to_string();
+            if !noted.ends_with('\n') {
+                noted.push('\n');
+            }
+            for o in overrides {
+                noted += &format!("// --set {}\n", o.replace('\n', " "));
+            }
+            noted
+        })
+}
+
+/// A check's error caused by `overrides`: named by the ones of its node (all, when it names
+/// none of theirs), with the check's message and hint and no position in the file.
+fn from_overrides(e: &Error, overrides: &[String]) -> Error {
+    let (message, help) = match e {
+        Error::Pipeline(p) => (p.message.clone(), p.help.clone()),
+        Error::Core(c) => (c.to_string(), None),
+    };
+    let node_of = |o: &String| o.split(['.', '=']).next().unwrap_or("").trim().to_string();
+    let mine: Vec<&String> = overrides
+        .iter()
+        .filter(|o| message.contains(&format!("node '{}'", node_of(o))))
+        .collect();
+    let named: Vec<&String> = if mine.is_empty() {
+        overrides.iter().collect()
+    } else {
+        mine
+    };
+    let sets: Vec<String> = named.iter().map(|o| format!("--set {o}")).collect();
+    let mut text = format!("{}: {message}", sets.join(" "));
+    if let Some(h) = help {
+        text += &format!(" (help: {h})");
+    }
+    imprint_core::Error::Invalid(text).into()
 }
 
 /// Validates pipeline text (`source.name` is used in messages).
 pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
     let file = read_file(&source)?;
+    checked(source, file, base_dir)
+}
+
+/// Checks a parsed file (`source` is where its errors are located) into a plan.
+fn checked(source: Source, file: PipelineFile, base_dir: &Path) -> Result<Plan> {
     let (graph, order) = typed_graph(&source, &file)?;
     let mut warnings = check_nodes(&source, &file, base_dir)?;
     let topo: Vec<String> = order.iter().map(|&n| graph[n].to_string()).collect();
@@ -69,13 +134,18 @@ pub fn parse(source: Source, base_dir: &Path) -> Result<Plan> {
 
 /// The file's RON and its run-wide values.
 fn read_file(source: &Source) -> Result<PipelineFile> {
-    let file: PipelineFile = ron::Options::default()
-        .with_default_extension(
-            ron::extensions::Extensions::IMPLICIT_SOME
-                | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
-        )
-        .from_str(&source.text)
-        .map_err(|e| ron_error(source, &e))?;
+    let file = from_ron(&source.text).map_err(|e| {
+        let mut err = ron_error(source, &e);
+        if e.code == ron::Error::IntegerOutOfBounds
+            && let Some(said) = integer_bounds(
+                &source.text,
+                source.offset(e.span.start.line, e.span.start.col),
+            )
+        {
+            err.message = said;
+        }
+        err
+    })?;
     let whole = 0..source.text.len().min(8);
     let fail = |msg: String| -> Error { source.error(whole.clone(), msg, "here", None).into() };
     if file.frames == 0 {
@@ -91,6 +161,77 @@ fn read_file(source: &Source) -> Result<PipelineFile> {
         return Err(fail("the pipeline has no nodes".into()));
     }
     Ok(file)
+}
+
+fn from_ron(text: &str) -> std::result::Result<PipelineFile, ron::error::SpannedError> {
+    ron::Options::default()
+        .with_default_extension(
+            ron::extensions::Extensions::IMPLICIT_SOME
+                | ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES,
+        )
+        .from_str(text)
+}
+
+/// For RON's "Integer is out of bounds" at byte `at` (in the number): the range of the field's
+/// integer type, found by putting other numbers in its place (`-1` fits no unsigned type,
+/// `256` no `u8`…), and what is wrong with the number: "expected an unsigned integer
+/// 0..=4294967295: substeps cannot be negative".
+fn integer_bounds(text: &str, at: usize) -> Option<String> {
+    let is_num = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '.';
+    let start = text[..at]
+        .char_indices()
+        .rev()
+        .find(|&(_, c)| !is_num(c))
+        .map_or(0, |(i, c)| i + c.len_utf8());
+    let start = if text[..start].ends_with(['-', '+']) {
+        start - 1
+    } else {
+        start
+    };
+    let end = text[at..]
+        .find(|c: char| !is_num(c))
+        .map_or(text.len(), |n| at + n);
+    let number = &text[start..end];
+    let out_of_bounds = |probe: &str| {
+        let edited = format!("{}{probe}{}", &text[..start], &text[end..]);
+        from_ron(&edited).is_err_and(|e| {
+            let here = Source {
+                name: String::new(),
+                text: edited.clone(),
+            }
+            .offset(e.span.start.line, e.span.start.col);
+            e.code == ron::Error::IntegerOutOfBounds && (start..=start + 1).contains(&here)
+        })
+    };
+    let signed = !out_of_bounds("-1");
+    let ty = [8u32, 16, 32, 64].into_iter().find_map(|bits| {
+        let first_outside = if signed {
+            1u128 << (bits - 1)
+        } else {
+            1u128 << bits
+        };
+        out_of_bounds(&first_outside.to_string())
+            .then(|| format!("{}{bits}", if signed { 'i' } else { 'u' }))
+    })?;
+    // The field: the name before `:`, if the number is a field's value.
+    let before = text[..start].trim_end();
+    let field = before
+        .strip_suffix(':')
+        .map(str::trim_end)
+        .and_then(|b| {
+            let from = b
+                .char_indices()
+                .rev()
+                .find(|&(_, c)| !(c.is_alphanumeric() || c == '_'))
+                .map_or(0, |(i, c)| i + c.len_utf8());
+            (from < b.len()).then(|| &b[from..])
+        })
+        .unwrap_or("the value");
+    Some(format!(
+        "{}: {}",
+        crate::overrides::int_range(&ty)?,
+        crate::overrides::out_of_range(field, number, signed)
+    ))
 }
 
 /// The graph of every input edge (each names a node of the file) and the nodes in
@@ -363,7 +504,7 @@ fn join(names: &[&String]) -> String {
 }
 
 /// The name at edit distance <= 2, if any (for "did you mean").
-fn closest_name<'a>(want: &str, names: &[&'a String]) -> Option<&'a str> {
+pub(crate) fn closest_name<'a>(want: &str, names: &[&'a String]) -> Option<&'a str> {
     names
         .iter()
         .map(|n| (edit_distance(want, n), n.as_str()))

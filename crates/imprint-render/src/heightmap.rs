@@ -11,9 +11,9 @@
 //! PNG under its final name always has its sidecar next to it.
 
 use crate::colormap::Colormap;
-use crate::font::{draw_text, fill_rect, text_height, text_width};
 use crate::npy::write_npy_f32;
 use crate::png::write_png;
+use crate::text::{draw_text, fill_rect, text_height, text_width};
 use image::codecs::png::PngEncoder;
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 use imprint_core::glam::{UVec2, Vec2};

@@ -1,9 +1,9 @@
 //! imprint-render: turning resources into files people and tools read. No physics here.
 //!
-//! - [`npy`]: NumPy `.npy` arrays (f32, u16, u8), so fields load with `numpy.load`;
+//! - [`npy`]: NumPy `.npy` arrays (f32, u16, u8) through npyz, so fields load with `numpy.load`;
 //! - [`field_io`]: a distance field as `_dist.npy`, `_vec.npy` and a `_field.json`;
 //! - [`colormap`]: viridis (sequential) and RdBu (diverging) colour tables;
-//! - [`font`]: a hand-made 5x7 bitmap font for labels, so pictures need no font files;
+//! - [`text`]: labels on pictures, drawn by ab_glyph in the DejaVu Sans shipped in `assets/fonts/`;
 //! - [`slice`]: a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
 //! - [`frame`]: the CPU frame renderer (meshes, field slices, sun + ambient, ground grid,
 //!   wireframe, supersampling);
@@ -17,7 +17,6 @@
 
 pub mod colormap;
 pub mod field_io;
-pub mod font;
 pub mod frame;
 pub mod gpu_frame;
 pub mod heightmap;
@@ -26,6 +25,7 @@ pub mod npy;
 pub mod png;
 pub mod sequence;
 pub mod slice;
+pub mod text;
 
 pub use colormap::Colormap;
 pub use field_io::{FieldMeta, write_field};

@@ -13,8 +13,8 @@
 //! Thumbnails are area-averaged downscales (`image::imageops::thumbnail`) and the GIF palette
 //! is NeuQuant's (the `gif` crate): both deterministic, so the same frames give the same bytes.
 
-use crate::font::{draw_text, text_height};
 use crate::png::write_png;
+use crate::text::{draw_text, text_height};
 use image::{Rgb, RgbImage, imageops};
 use imprint_core::io::atomic_write_bytes;
 use imprint_core::{Error, Result};
@@ -142,8 +142,8 @@ impl ContactSheet {
             let (x, y) = (GAP + c * (tw + GAP), GAP + r * (th + GAP));
             imageops::replace(&mut sheet, tile, x as i64, y as i64);
             let label = format!("f {frame}");
-            let lw = crate::font::text_width(&label, scale);
-            crate::font::fill_rect(
+            let lw = crate::text::text_width(&label, scale);
+            crate::text::fill_rect(
                 &mut sheet,
                 x as i64,
                 y as i64,
@@ -346,7 +346,7 @@ mod tests {
     /// A frame whose colour encodes its index, with a white square marking a position.
     fn frame(k: u32, w: u32, h: u32) -> RgbImage {
         let mut img = RgbImage::from_pixel(w, h, Rgb([(40 * k) as u8, 100, 200 - (20 * k) as u8]));
-        crate::font::fill_rect(&mut img, (10 * k) as i64, 30, 16, 16, Rgb([255, 255, 255]));
+        crate::text::fill_rect(&mut img, (10 * k) as i64, 30, 16, 16, Rgb([255, 255, 255]));
         img
     }
 

@@ -15,8 +15,8 @@
 
 use crate::colormap::Colormap;
 use crate::field_io::check_field;
-use crate::font::{GLYPH_H, draw_text, fill_rect, text_height, text_width};
 use crate::png::write_png;
+use crate::text::{cap_height, draw_text, fill_rect, text_height, text_width};
 use image::{Rgb, RgbImage};
 use imprint_core::glam::UVec3;
 use imprint_core::{DistanceField, Error, GridSpec, Result};
@@ -359,7 +359,7 @@ fn add_legend(
     let ts = if sw.max(sh) >= 256 { 2 } else { 1 };
     let tsi = ts as i64;
     let lh = text_height(ts) as i64;
-    let cap = (GLYPH_H * ts) as i64;
+    let cap = cap_height(ts) as i64;
     let gap = 4 * tsi;
     let margin = 8 * tsi;
 

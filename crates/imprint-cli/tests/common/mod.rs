@@ -4,12 +4,13 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs the built binary in `cwd` (with a runtime folder, so the graphics stack's probe has
-/// one).
+/// one, and the default log level whatever `IMPRINT_LOG` the test runner has).
 pub fn imprint(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_imprint"))
         .args(args)
         .current_dir(cwd)
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .env_remove("IMPRINT_LOG")
         .output()
         .expect("imprint runs")
 }

@@ -113,6 +113,14 @@ impl Executor {
         }
         ex.waves = wave::waves(&ex.slots);
         ex.report.adapter = ex.gpu.map(|g| g.adapter_name());
+        tracing::info!(
+            "{} node(s) in {} wave(s), frames {}..{}, {} thread(s)",
+            ex.slots.len(),
+            ex.waves.len(),
+            ex.frames.start,
+            ex.frames.end,
+            ex.report.threads
+        );
         Ok(ex)
     }
 
@@ -143,6 +151,7 @@ impl Executor {
         };
         let stage = spec.build(&mut ctx)?;
         let backend = if stage.on_gpu() { "gpu" } else { "cpu" };
+        tracing::info!("node '{name}': {} on the {backend}", spec.kind());
         Ok(Slot {
             name: name.to_string(),
             inputs: spec.inputs().iter().map(|p| p.node.to_string()).collect(),
@@ -254,6 +263,13 @@ impl Executor {
         summary.ms = start.elapsed().as_secs_f64() * 1e3 - observed_ms;
         self.report.frames.push(frame);
         self.report.frame_ms.push(summary.ms);
+        tracing::debug!("frame {frame}: {:.2} ms", summary.ms);
+        for (name, ms, worked) in &summary.nodes {
+            tracing::trace!(
+                "frame {frame}: node '{name}' {ms:.3} ms{}",
+                if *worked { "" } else { " (idle)" }
+            );
+        }
         self.keep_if_due()?;
         Ok(summary)
     }

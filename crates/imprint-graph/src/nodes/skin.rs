@@ -350,8 +350,8 @@ impl Animated {
         }
         let (pose, dropped) = self.skeleton.rigid_pose(t);
         if dropped > 1e-3 && !self.warned.swap(true, Ordering::Relaxed) {
-            eprintln!(
-                "warning: node '{}': the rig's joints scale by up to {:.1}% at {t:.3} s; \
+            tracing::warn!(
+                "node '{}': the rig's joints scale by up to {:.1}% at {t:.3} s; \
                  dual quaternions and particles follow rotation and translation only (use \
                  method: Linear to follow scale)",
                 self.node,
