@@ -84,7 +84,15 @@ impl App {
     fn new(opts: ViewOptions, gpu: &'static GpuContext) -> App {
         let session = Session::open(&opts.file, &opts.sets, opts.frames.clone(), opts.backend);
         let mut app = App {
-            watch: Watch::new(&opts.file).ok(),
+            watch: Watch::new(&opts.file)
+                .inspect_err(|e| {
+                    tracing::warn!(
+                        "cannot watch {} for saves ({e}): saves will not reload it; \
+                         restart imprint view after editing",
+                        opts.file.display()
+                    )
+                })
+                .ok(),
             objects: Vec::new(),
             camera: None,
             panel: Panel::new(opts.target_fps),
