@@ -49,6 +49,17 @@ fn main() {
             .is_some_and(|s| !s.is_empty());
         if dirty { format!("{hash}-dirty") } else { hash }
     } else {
+        // git failed (absent, or busy): where a repository is there after all, run again
+        // when it changes, so a passing failure does not stick in the build cache.
+        if let Some(git_dir) = here
+            .ancestors()
+            .map(|a| a.join(".git"))
+            .find(|g| g.exists())
+        {
+            for f in ["HEAD", "index"] {
+                println!("cargo::rerun-if-changed={}", git_dir.join(f).display());
+            }
+        }
         "unknown".to_string()
     };
     println!("cargo::rustc-env=IMPRINT_GIT_REV={rev}");

@@ -1,4 +1,4 @@
-// One cloth substep (H eq. 9-12, METHODS §3), the GPU twin of imprint_stages::cloth::cpu:
+// One cloth substep (H eq. 9-12, docs/methods.md §3), the GPU twin of imprint_stages::cloth::cpu:
 // one invocation per particle gathers its spring forces from `pos` (CSR over LinkQuads, four
 // springs per 64-byte struct) and its hinges' bending forces (T eq. 2, CSR over hinge refs),
 // integrates damped position Verlet from `pos` and `prev` into `next` (pins: their target,

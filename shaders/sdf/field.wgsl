@@ -1,4 +1,4 @@
-// Narrow-band distance field from a discrete boundary (METHODS §2), the GPU twin of
+// Narrow-band distance field from a discrete boundary (docs/methods.md §2), the GPU twin of
 // imprint_stages::sdf::cpu.
 //
 // In grid coordinates (cell centres at integers). Each boundary point writes into the cells

@@ -1,4 +1,4 @@
-// Surface voxelisation into a discrete boundary (METHODS §1), the GPU twin of
+// Surface voxelisation into a discrete boundary (docs/methods.md §1), the GPU twin of
 // imprint_stages::voxel::cpu. Prepended: common/dispatch.wgsl, common/geom.wgsl.
 //
 // Everything is in grid coordinates (cell (i, j, k)'s centre is the point (i, j, k)).

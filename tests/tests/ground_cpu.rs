@@ -1,4 +1,4 @@
-//! Ground (METHODS §7, O) on the CPU: tests with known answers.
+//! Ground (docs/methods.md §7, O) on the CPU: tests with known answers.
 //!
 //! Fields are flat at h0 = 0.1 m with 1 cm cells (5 mm where a radius is measured) and the
 //! default height unit of 1e-5 m, so every depth below is a whole number of units.

@@ -1,7 +1,7 @@
-//! The CPU snow stage (T §(1), METHODS §5) against answers known in advance: flat ground gets
-//! a uniform layer; a slope below the repose angle gets depth ∝ cos φ; nothing lands under a
-//! roof in vertical fall; with K jittered directions the coverage beside the roof's edge
-//! follows the ring's penumbra F(a) = 1/2 + asin(a)/π to within 1/K and a texel;
+//! The CPU snow stage (T §(1), docs/methods.md §5) against answers known in advance: flat
+//! ground gets a uniform layer; a slope below the repose angle gets depth ∝ cos φ; nothing
+//! lands under a roof in vertical fall; with K jittered directions the coverage beside the
+//! roof's edge follows the ring's penumbra F(a) = 1/2 + asin(a)/π to within 1/K and a texel;
 //! stabilisation conserves the snow to the quantum; a point pour settles to the cone of
 //! height (3V tan²θ / π)^(1/3); the same bytes on one and two threads. Each runs in about a
 //! second or less in release; the timing test is ignored.

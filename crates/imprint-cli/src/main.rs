@@ -30,12 +30,21 @@ macro_rules! outln {
 }
 
 mod log;
+mod schema_cmd;
 mod sweep;
+
+/// `imprint --version`, and the version every report.json states.
+const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (git ",
+    env!("IMPRINT_GIT_REV"),
+    ")"
+);
 
 #[derive(Parser)]
 #[command(
     name = "imprint",
-    version = concat!(env!("CARGO_PKG_VERSION"), " (git ", env!("IMPRINT_GIT_REV"), ")"),
+    version = VERSION,
     about = "How deforming bodies touch soft things: distance fields, cloth, snow, ground"
 )]
 struct Cli {
@@ -172,6 +181,12 @@ enum Command {
         #[arg(value_enum)]
         shell: clap_complete::Shell,
     },
+    /// Print the JSON Schema of a pipeline file or of report.json, or the node reference
+    /// (`imprint schema nodes-md > docs/nodes.md`).
+    Schema {
+        #[arg(value_enum)]
+        what: schema_cmd::SchemaWhat,
+    },
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -238,6 +253,7 @@ fn main() -> ExitCode {
     // Before anything else runs, while this is the only thread (see `quiet_display_probe`).
     quiet_display_probe();
     log::init(cli.verbose, cli.quiet);
+    imprint_graph::report::set_program_version(VERSION);
     let code = run_command(cli);
     remove_runtime_dir();
     code
@@ -406,6 +422,7 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             Ok(())
         }
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Schema { what } => schema_cmd::print(what),
         Command::Completions { shell } => {
             use clap::CommandFactory;
             let mut script = Vec::new();

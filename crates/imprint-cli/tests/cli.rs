@@ -532,7 +532,9 @@ fn heightmaps_contact_sheet_and_gif() {
                     exr.get(i, k)
                 );
                 assert!((png.get(i, k) - w).abs() <= step, "png ({i},{k})");
-                assert_eq!(npy.1[exr.index(i, k)], exr.get(i, k), "npy ({i},{k})");
+                // North up, as the pictures: row r holds k = nz - 1 - r.
+                let north_up = ((19 - k) * 20 + i) as usize;
+                assert_eq!(npy.1[north_up], exr.get(i, k), "npy ({i},{k})");
             }
         }
         assert!(d.join(format!("hm/top_{frame}_preview.png")).is_file());

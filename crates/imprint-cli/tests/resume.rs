@@ -94,7 +94,7 @@ fn stateful_scene_on(frames: u32, backend: &str) -> String {
     )
 }
 
-/// Every file under `dir` but the report and the checkpoint, with its bytes.
+/// Every file under `dir` but the report, the manifest and the checkpoint, with its bytes.
 fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     let mut out = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
@@ -103,7 +103,7 @@ fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             let p = e.unwrap().path();
             if p.is_dir() {
                 stack.push(p);
-            } else if !["report.json", "checkpoint.bin"]
+            } else if !["report.json", "manifest.json", "checkpoint.bin"]
                 .contains(&p.file_name().unwrap().to_str().unwrap())
             {
                 out.insert(

@@ -4,11 +4,12 @@
 use crate::GridSpec;
 use glam::{UVec3, Vec3, Vec4};
 use rayon::prelude::*;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, OnceLock};
 
 /// Which point stands for a surface cell.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum BoundaryVariant {
     /// H's discrete boundary: the cell centre (accurate only to a cell).
     Centre,

@@ -1,10 +1,13 @@
 //! A whole run: an [`Executor`] stepped frame by frame into an output folder, with
 //! checkpoints on request, resumption from them, and a `report.json` that is written whatever
 //! happens (after the last frame, or with the frames done and the error when a frame fails or
-//! the run is interrupted).
+//! the run is interrupted). Beside it, `manifest.json` lists what the run wrote; what the
+//! folder's previous run wrote and this one did not is removed when this one completes
+//! ([`crate::manifest`]).
 
 use crate::executor::{Checkpoint, Executor, checkpoint_path};
 pub use crate::executor::{Observed, Observer, RunOptions};
+use crate::manifest::{Manifest, RUN_KEY};
 use crate::plan::Plan;
 use crate::report::Report;
 use imprint_core::Error;
@@ -35,12 +38,15 @@ pub fn run_observed(
 pub struct Run {
     ex: Executor,
     opts: RunOptions,
+    /// The folder's manifest before this run (empty when it had none).
+    previous: Manifest,
 }
 
 impl Run {
     /// Builds every stage; with `opts.resume`, restores the folder's checkpoint. Nothing is
     /// written yet, so a refused resume leaves the folder as it was.
     pub fn start(plan: &Plan, opts: &RunOptions) -> crate::Result<Run> {
+        let previous = Manifest::read(&opts.out)?.unwrap_or_default();
         let mut ex = Executor::new(plan, opts.clone())?;
         if opts.resume {
             let c = Checkpoint::read_dir(&opts.out)?;
@@ -50,6 +56,7 @@ impl Run {
         Ok(Run {
             ex,
             opts: opts.clone(),
+            previous,
         })
     }
 
@@ -68,57 +75,89 @@ impl Run {
         progress: &mut dyn FnMut(u32, u32),
         mut observer: Option<&mut dyn Observer>,
     ) -> crate::Result<Report> {
-        let (ex, opts) = (&mut self.ex, &self.opts);
-        let total = ex.frames().len() as u32;
-        while !ex.done() {
-            if opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
+        let total = self.ex.frames().len() as u32;
+        while !self.ex.done() {
+            let stop = self.opts.stop.as_ref();
+            if stop.is_some_and(|s| s.load(Ordering::SeqCst)) {
                 let e = Error::Interrupted {
-                    frame: ex.next_frame(),
+                    frame: self.ex.next_frame(),
                 };
-                return Err(stopped(ex, opts, e.into()));
+                return Err(self.stopped(e.into()));
             }
             let obs: Option<&mut dyn Observer> = match observer {
                 Some(ref mut o) => Some(&mut **o),
                 None => None,
             };
-            if let Err(e) = ex.step_observed(obs) {
-                return Err(stopped(ex, opts, e));
+            if let Err(e) = self.ex.step_observed(obs) {
+                return Err(self.stopped(e));
             }
+            let ex = &self.ex;
             progress(ex.next_frame() - ex.frames().start, total);
-            let every = opts.checkpoint_every;
+            let every = self.opts.checkpoint_every;
             let since = ex.next_frame() - ex.frames().start;
             if every > 0 && since.is_multiple_of(every) && !ex.done() {
-                save_checkpoint(ex, &opts.out)?;
+                self.save_checkpoint()?;
             }
         }
-        if opts.checkpoint_every > 0 {
+        if self.opts.checkpoint_every > 0 {
             // Before the whole-run writers: a later run may go on from here.
-            save_checkpoint(ex, &opts.out)?;
+            self.save_checkpoint()?;
         }
-        let report = ex.finish()?;
-        write_report(&report, &opts.out)?;
+        let mut report = self.ex.finish()?;
+        let mut manifest = self.manifest();
+        report.stale_removed = manifest.remove_stale(&self.opts.out)?;
+        manifest.write(&self.opts.out)?;
+        write_report(&report, &self.opts.out)?;
         Ok(report)
     }
-}
 
-/// The checkpoint and the report so far, in `out` (a run killed later leaves both).
-fn save_checkpoint(ex: &Executor, out: &Path) -> crate::Result<()> {
-    ex.checkpoint()?.write(&checkpoint_path(out))?;
-    write_report(&ex.report(), out)
-}
-
-/// A run that stopped early: its report says how far it got and why; with checkpoints, the
-/// state before the failed frame is kept too.
-fn stopped(ex: &Executor, opts: &RunOptions, e: crate::Error) -> crate::Error {
-    let mut report = ex.report();
-    report.error = Some(e.to_string());
-    let _ = write_report(&report, &opts.out);
-    if opts.checkpoint_every > 0 && matches!(&e, crate::Error::Core(Error::Interrupted { .. })) {
-        let _ = ex
-            .checkpoint()
-            .and_then(|c| Ok(c.write(&checkpoint_path(&opts.out))?));
+    /// What this run wrote so far (and, resumed, what the run it continues wrote), with what
+    /// the folder's earlier runs wrote besides as stale.
+    fn manifest(&self) -> Manifest {
+        let out = &self.opts.out;
+        let mut m = Manifest {
+            pipeline: self.ex.plan.source.name.clone(),
+            ..Default::default()
+        };
+        if self.opts.resume {
+            m.files = self.previous.files.clone();
+        }
+        for (node, files) in self.ex.written() {
+            m.add(out, node, files.iter().cloned());
+        }
+        if self.opts.checkpoint_every > 0 || self.opts.resume {
+            m.add(out, RUN_KEY, [checkpoint_path(out)]);
+        }
+        m.inherit_stale(&self.previous);
+        m
     }
-    e
+
+    /// The checkpoint, the manifest and the report so far, in `out` (a run killed later
+    /// leaves all three).
+    fn save_checkpoint(&self) -> crate::Result<()> {
+        let out = &self.opts.out;
+        self.ex.checkpoint()?.write(&checkpoint_path(out))?;
+        self.manifest().write(out)?;
+        write_report(&self.ex.report(), out)
+    }
+
+    /// A run that stopped early: its report says how far it got and why; with checkpoints,
+    /// the state before the failed frame is kept too. Nothing is removed: the manifest lists
+    /// the earlier run's files as stale, for the next complete run.
+    fn stopped(&self, e: crate::Error) -> crate::Error {
+        let (ex, opts) = (&self.ex, &self.opts);
+        let mut report = ex.report();
+        report.error = Some(e.to_string());
+        let _ = self.manifest().write(&opts.out);
+        let _ = write_report(&report, &opts.out);
+        let interrupted = matches!(&e, crate::Error::Core(Error::Interrupted { .. }));
+        if opts.checkpoint_every > 0 && interrupted {
+            let _ = ex
+                .checkpoint()
+                .and_then(|c| Ok(c.write(&checkpoint_path(&opts.out))?));
+        }
+        e
+    }
 }
 
 fn write_report(report: &Report, out: &Path) -> crate::Result<()> {

@@ -11,6 +11,8 @@ pub mod budget;
 pub mod diagnostics;
 pub mod exec;
 pub mod executor;
+pub mod json_schema;
+pub mod manifest;
 pub mod node;
 pub mod nodes;
 pub mod overrides;

@@ -9,6 +9,7 @@ use crate::schedule::Schedule;
 use crate::value::{BoundaryIn, FieldIn, HeightsIn, MeshIn, Value, Values};
 use imprint_core::{Aabb, Error};
 use imprint_gpu::GpuContext;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::collections::BTreeMap;
@@ -16,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 /// Where a node runs. `Auto` takes a hardware GPU when there is one, the CPU otherwise (a
 /// software Vulkan adapter is never picked by `Auto`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 pub enum Backend {
     #[default]
     Auto,
@@ -138,9 +139,10 @@ pub trait Stage: Send {
     fn on_gpu(&self) -> bool {
         false
     }
-    /// Whole-run output (a contact sheet, a GIF), after the last frame; returns files written.
-    fn finish(&mut self, _report: &mut NodeReport) -> imprint_core::Result<usize> {
-        Ok(0)
+    /// Whole-run output (a contact sheet, a GIF), after the last frame; returns the files
+    /// written (for the run's manifest).
+    fn finish(&mut self, _report: &mut NodeReport) -> imprint_core::Result<Vec<PathBuf>> {
+        Ok(Vec::new())
     }
     /// The state it carries between frames, for a checkpoint (empty: none). `values`: every
     /// node's current value (a stage may note which of its own references are the same).
@@ -162,8 +164,8 @@ pub struct Step {
     pub worked: bool,
     /// It took its inputs' current values in (so they count as seen).
     pub consumed: bool,
-    /// Files it wrote.
-    pub files: usize,
+    /// Files it wrote (the run's manifest lists them, so a rerun can remove stale ones).
+    pub files: Vec<PathBuf>,
     /// Time inside the run that is not the stage's (error measurement), ms.
     pub untimed_ms: f64,
 }
@@ -184,8 +186,8 @@ impl Step {
         }
     }
 
-    /// A writer wrote `files` files.
-    pub fn wrote(files: usize) -> Self {
+    /// A writer wrote `files`.
+    pub fn wrote(files: Vec<PathBuf>) -> Self {
         Step {
             worked: true,
             files,

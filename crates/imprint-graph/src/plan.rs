@@ -22,8 +22,14 @@ pub struct Plan {
     pub topo: Vec<String>,
     /// Nodes that do not run, with the reason.
     pub pruned: Vec<(String, String)>,
+    /// What would run were every writer switched on, writers included, in dependency order:
+    /// a live view runs these (less the writers), showing what the file's writers would
+    /// write whether or not they are on. Nodes switched off themselves are not among them.
+    pub producers: Vec<String>,
     /// What the user should know before running (a writer that lost its input…).
     pub warnings: Vec<String>,
+    /// The `--set` overrides applied to the file, as given (the report states them).
+    pub overrides: Vec<String>,
 }
 
 /// Reads, overrides (`NODE.FIELD=VALUE`) and validates a pipeline file.
@@ -58,6 +64,7 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Plan> {
         }
     })?;
     plan.source.text = described(&source.text, overrides);
+    plan.overrides = overrides.to_vec();
     Ok(plan)
 }
 
@@ -119,16 +126,18 @@ fn checked(source: Source, file: PipelineFile, base_dir: &Path) -> Result<Plan> 
     let (graph, order) = typed_graph(&source, &file)?;
     let mut warnings = check_nodes(&source, &file, base_dir)?;
     let topo: Vec<String> = order.iter().map(|&n| graph[n].to_string()).collect();
-    let (run_order, pruned, pruning) = prune(&file, &graph, &order);
-    warnings.extend(pruning);
+    let pruning = prune(&file, &graph, &order);
+    warnings.extend(pruning.warnings);
     Ok(Plan {
         source,
         file,
         base_dir: base_dir.to_path_buf(),
-        order: run_order,
+        order: pruning.run_order,
         topo,
-        pruned,
+        pruned: pruning.pruned,
+        producers: pruning.producers,
         warnings,
+        overrides: Vec::new(),
     })
 }
 
@@ -331,52 +340,79 @@ fn check_nodes(source: &Source, file: &PipelineFile, base_dir: &Path) -> Result<
     Ok(warnings)
 }
 
+/// What a plan's pruning decided.
+struct Pruning {
+    /// What runs, in dependency order.
+    run_order: Vec<String>,
+    /// What does not, and why.
+    pruned: Vec<(String, String)>,
+    warnings: Vec<String>,
+    /// What would run were every writer switched on (see [`Plan::producers`]).
+    producers: Vec<String>,
+}
+
 /// What runs (in dependency order), what is pruned and why, and what to warn about: nodes
-/// that reach no writer, nodes switched off (and what reads them), and the mesh and
-/// boundary read ahead of time by an interpolated field only.
-fn prune(
-    file: &PipelineFile,
-    graph: &DiGraph<&str, ()>,
-    order: &[NodeIndex],
-) -> (Vec<String>, Vec<(String, String)>, Vec<String>) {
+/// that reach no writer that is switched on, nodes switched off (and what reads them), and
+/// the mesh and boundary read ahead of time by an interpolated field only.
+fn prune(file: &PipelineFile, graph: &DiGraph<&str, ()>, order: &[NodeIndex]) -> Pruning {
+    let (off, warnings) = switched_off(file, graph, order);
     let writers: Vec<NodeIndex> = graph
         .node_indices()
         .filter(|&i| file.nodes[graph[i]].is_writer())
         .collect();
-    let mut needed = BTreeSet::new();
-    let mut stack = writers.clone();
+    let live: Vec<NodeIndex> = writers
+        .iter()
+        .copied()
+        .filter(|w| !off.contains_key(w))
+        .collect();
+    let needed = upstream(graph, &live);
+    let wanted = upstream(graph, &writers);
+    let runs_from = |set: &BTreeSet<NodeIndex>| {
+        let ahead = read_ahead(file, graph, order, |m| {
+            set.contains(m) && !off.contains_key(m)
+        });
+        let runs: Vec<NodeIndex> = order
+            .iter()
+            .copied()
+            .filter(|n| set.contains(n) && !off.contains_key(n) && !ahead.contains_key(n))
+            .collect();
+        (runs, ahead)
+    };
+    let (runs, ahead) = runs_from(&needed);
+    let name = |n: &NodeIndex| graph[*n].to_string();
+    let mut pruned = Vec::new();
+    for n in order.iter().filter(|n| !runs.contains(n)) {
+        let why = if let Some(why) = off.get(n) {
+            why.clone()
+        } else if let Some(field) = ahead.get(n) {
+            format!("only '{field}' reads it, building ahead of time (interpolate)")
+        } else if wanted.contains(n) {
+            "it feeds only writers that are switched off (enabled: false)".to_string()
+        } else if writers.is_empty() {
+            "the pipeline has no writer, so nothing would be kept".to_string()
+        } else {
+            "its output reaches no writer".to_string()
+        };
+        pruned.push((name(n), why));
+    }
+    Pruning {
+        run_order: runs.iter().map(name).collect(),
+        pruned,
+        warnings,
+        producers: runs_from(&wanted).0.iter().map(name).collect(),
+    }
+}
+
+/// `from` and every node upstream of them.
+fn upstream(graph: &DiGraph<&str, ()>, from: &[NodeIndex]) -> BTreeSet<NodeIndex> {
+    let mut seen = BTreeSet::new();
+    let mut stack = from.to_vec();
     while let Some(n) = stack.pop() {
-        if needed.insert(n) {
+        if seen.insert(n) {
             stack.extend(graph.neighbors_directed(n, petgraph::Direction::Incoming));
         }
     }
-    let (off, warnings) = switched_off(file, graph, order, &needed);
-    let ahead = read_ahead(file, graph, order, |m| {
-        needed.contains(m) && !off.contains_key(m)
-    });
-    let mut run_order = Vec::new();
-    let mut pruned = Vec::new();
-    for &n in order {
-        let name = graph[n].to_string();
-        if let Some(why) = off.get(&n) {
-            pruned.push((name, why.clone()));
-        } else if let Some(field) = ahead.get(&n) {
-            pruned.push((
-                name,
-                format!("only '{field}' reads it, building ahead of time (interpolate)"),
-            ));
-        } else if needed.contains(&n) {
-            run_order.push(name);
-        } else {
-            let reason = if writers.is_empty() {
-                "the pipeline has no writer, so nothing would be kept".to_string()
-            } else {
-                "its output reaches no writer".to_string()
-            };
-            pruned.push((name, reason));
-        }
-    }
-    (run_order, pruned, warnings)
+    seen
 }
 
 /// Switched off: `enabled: false` and everything downstream of it; a writer that loses its
@@ -385,7 +421,6 @@ fn switched_off(
     file: &PipelineFile,
     graph: &DiGraph<&str, ()>,
     order: &[NodeIndex],
-    needed: &BTreeSet<NodeIndex>,
 ) -> (BTreeMap<NodeIndex, String>, Vec<String>) {
     let mut off: BTreeMap<NodeIndex, String> = BTreeMap::new();
     let mut warnings = Vec::new();
@@ -398,7 +433,7 @@ fn switched_off(
             .find(|u| off.contains_key(u))
         {
             off.insert(n, format!("reads '{}', which is switched off", graph[up]));
-            if file.nodes[name].is_writer() && needed.contains(&n) {
+            if file.nodes[name].is_writer() {
                 warnings.push(format!(
                     "writer '{name}' loses its input '{}' (switched off), so it writes nothing",
                     graph[up]

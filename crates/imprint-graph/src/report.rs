@@ -1,9 +1,84 @@
 //! Per-node timing and metrics, collected every frame and written as `report.json`.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+/// The layout version [`Report::schema_version`] states (see there for when it goes up).
+pub const REPORT_SCHEMA_VERSION: u32 = 1;
+
+/// The program's version as reports state it; the binary sets it (with its git revision)
+/// before running, as only the binary's build knows the revision.
+static PROGRAM_VERSION: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// Names the program's version in every report written from now on (the first call wins).
+pub fn set_program_version(version: &str) {
+    let _ = PROGRAM_VERSION.set(version.to_string());
+}
+
+/// The version reports state: the binary's, else this crate's (no git revision known).
+pub fn program_version() -> String {
+    PROGRAM_VERSION
+        .get()
+        .cloned()
+        .unwrap_or_else(|| env!("CARGO_PKG_VERSION").to_string())
+}
+
+/// Units of every number in the pipeline file and the files a run writes (the report's own
+/// timings excepted: milliseconds, named `*_ms`).
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema, PartialEq)]
+pub struct Units {
+    /// Lengths and positions: metres.
+    pub length: String,
+    /// Times (motion keys, clip times, `fps`): seconds.
+    pub time: String,
+    /// Angles (rotations, twists, bends, repose angles): degrees.
+    pub angle: String,
+    /// Masses (cloth particles): kilograms.
+    pub mass: String,
+    /// The report's timings (`wall_ms`, `frame_ms`, `*_ms` of each node): milliseconds.
+    pub durations: String,
+}
+
+impl Default for Units {
+    fn default() -> Self {
+        Units {
+            length: "metre".into(),
+            time: "second".into(),
+            angle: "degree".into(),
+            mass: "kilogram".into(),
+            durations: "millisecond".into(),
+        }
+    }
+}
+
+/// The world's frame, and how height maps lay out their cells.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema, PartialEq)]
+pub struct Axes {
+    /// Which way is up: `+y` (gravity is -y; height fields are heights in y over x-z).
+    pub up: String,
+    /// `right-handed` (x right, y up, z toward the viewer).
+    pub handedness: String,
+    /// What a row of a height map (PNG, EXR, `.npy`, preview) is: a line of constant z,
+    /// row 0 the largest z.
+    pub heightmap_rows: String,
+    /// What a column of a height map is: a line of constant x, column 0 the smallest x.
+    pub heightmap_columns: String,
+}
+
+impl Default for Axes {
+    fn default() -> Self {
+        Axes {
+            up: "+y".into(),
+            handedness: "right-handed".into(),
+            heightmap_rows: imprint_render::heightmap::ROWS.into(),
+            heightmap_columns: imprint_render::heightmap::COLUMNS.into(),
+        }
+    }
+}
+
+/// One node's runs, times and figures over the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
 pub struct NodeReport {
     pub kind: String,
     /// "cpu" or "gpu".
@@ -31,7 +106,7 @@ pub struct NodeReport {
 }
 
 /// Bytes a node moved between host and GPU on one frame.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
 pub struct FrameTransfers {
     pub frame: u32,
     pub uploaded_bytes: u64,
@@ -59,8 +134,28 @@ impl NodeReport {
     }
 }
 
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+/// `report.json`: what ran, how long it took, what it measured, and what the numbers mean.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
 pub struct Report {
+    /// The layout of this file ([`REPORT_SCHEMA_VERSION`]): raised when a field is removed,
+    /// renamed or changes meaning, not when one is added, so a reader that knows version N
+    /// reads every file of version N.
+    #[serde(default)]
+    pub schema_version: u32,
+    /// The imprint that wrote the file: its version and git revision, as `imprint --version`
+    /// prints them.
+    #[serde(default)]
+    pub imprint_version: String,
+    /// The `--set NODE.FIELD=VALUE` arguments of the run, as given and in their order.
+    #[serde(default)]
+    pub overrides: Vec<String>,
+    /// The units of the pipeline file and of every file the run writes.
+    #[serde(default)]
+    pub units: Units,
+    /// The world's axes, and how height maps lay them out.
+    #[serde(default)]
+    pub axes: Axes,
+    /// The pipeline file, as named on the command line.
     pub pipeline: String,
     pub frames: Vec<u32>,
     pub fps: f32,
@@ -84,6 +179,14 @@ pub struct Report {
     /// The frame the run resumed at, when it continued from a checkpoint.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resumed_at: Option<u32>,
+    /// Files the folder's previous run wrote and this one did not, removed at its end
+    /// (`manifest.json` lists what each run wrote).
+    #[serde(default, skip_serializing_if = "is_zero_usize")]
+    pub stale_removed: usize,
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
 }
 
 impl Report {

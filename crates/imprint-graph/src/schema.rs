@@ -7,10 +7,11 @@ pub use crate::node::{Backend, PortType};
 use crate::node::{Node, Port};
 pub use crate::nodes::*;
 use imprint_stages::mesh::MeshParams;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(rename = "Pipeline", deny_unknown_fields)]
 pub struct PipelineFile {
     /// Number of frames to run.
@@ -18,6 +19,8 @@ pub struct PipelineFile {
     /// Frames per second: frame f is at time f / fps seconds.
     #[serde(default = "default_fps")]
     pub fps: f32,
+    /// Where nodes run unless their own `backend` says: `Auto`, `Cpu` or `Gpu` (the
+    /// command line's `--backend` overrides both).
     #[serde(default)]
     pub backend: Backend,
     /// Seed for every stochastic stage (none yet in this version; kept for reproducibility).
@@ -37,7 +40,7 @@ fn default_fps() -> f32 {
 macro_rules! node_kinds {
     ($($(#[$doc:meta])* $kind:ident($spec:ty),)*) => {
         /// A node of the file: its kind and fields.
-        #[derive(Clone, Debug, Deserialize, Serialize)]
+        #[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
         pub enum NodeSpec {
             $($(#[$doc])* $kind($spec),)*
         }

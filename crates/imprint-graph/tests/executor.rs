@@ -167,8 +167,8 @@ fn concurrent_nodes_equal_sequential_ones() {
         let files = files(&out);
         assert_eq!(
             files.len(),
-            8 * 5,
-            "frames, two meshes and two height maps per frame"
+            8 * 7,
+            "frames, two meshes and two height maps with their sidecars per frame"
         );
         assert_eq!(files, self::files(&other), "{name}: written files differ");
     }

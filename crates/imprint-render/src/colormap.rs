@@ -9,10 +9,11 @@
 //! Both are tables of sRGB bytes, sampled with linear interpolation between entries; `t` is
 //! clamped to [0, 1] (NaN reads as 0), so a caller never indexes out of the table.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Which colour map a picture uses (serde: `Viridis`, `Diverging`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum Colormap {
     #[default]
     Viridis,

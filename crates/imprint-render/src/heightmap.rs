@@ -1,11 +1,12 @@
 //! Height fields as files: a 16-bit grayscale PNG with a JSON sidecar, a single-channel f32
 //! OpenEXR, a NumPy `.npy`, and an 8-bit colour-mapped preview PNG with a legend.
 //!
-//! Orientation of the images (PNG, EXR, preview): **north up**. Image row 0 is the highest z
-//! index (`k = nz - 1`), the last row is `k = 0`; image column `c` is `i = c` (x grows to the
-//! right). Looking down the -y axis with x to the right, z then points up the page.
-//! The `.npy` array is `[nz, nx]` in storage order instead: `a[k, i] = get(i, k)` (row 0 is
-//! `k = 0`), which is what code indexing the array wants.
+//! Orientation of every file (PNG, EXR, `.npy`, preview): **north up**. Row 0 is the highest
+//! z index (`k = nz - 1`), the last row is `k = 0`; column `c` is `i = c` (x grows to the
+//! right). Looking down the -y axis with x to the right, z then points up the page. The
+//! `.npy` array, shape `[nz, nx]`, is laid out as the pictures are (`a[r, c] = get(c, nz - 1
+//! - r)`), so `imshow(a)` shows what the PNG shows; `a[::-1]` indexes it by `[k, i]`. The
+//! PNG's and the `.npy`'s sidecars say so ([`ROWS`], [`COLUMNS`]).
 //!
 //! Every file goes through [`atomic_write`]. The PNG's sidecar is written before the PNG, so a
 //! PNG under its final name always has its sidecar next to it.
@@ -22,16 +23,23 @@ use imprint_core::{Error, HeightField, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// The orientation every heightmap image uses, as recorded in the sidecar.
+/// The orientation every heightmap file uses, as recorded in the sidecar.
 pub const ORIENTATION: &str =
     "row 0 = highest z index (north up); column 0 = lowest x index; x right, z up the page";
+
+/// What a row of every heightmap file is, in world terms (sidecars and `report.json` say it).
+pub const ROWS: &str = "constant z; row 0 is the largest z (north up), the last row the smallest";
+
+/// What a column of every heightmap file is, in world terms.
+pub const COLUMNS: &str = "constant x; column 0 is the smallest x, x grows to the right";
 
 /// Largest 16-bit level: `min` maps to 0, `max` to this.
 const LEVELS: f64 = 65535.0;
 
-/// The JSON sidecar of a 16-bit heightmap PNG (`<png path>.json`): everything needed to turn
-/// the levels back into heights at their world positions.
-/// `height = min + level * (max - min) / 65535`; level 0 is exactly `min`, 65535 exactly `max`.
+/// The JSON sidecar of a 16-bit heightmap PNG or a `.npy` (`<path>.json`): everything needed
+/// to put the cells at their world positions, and for the PNG to turn the levels back into
+/// heights: `height = min + level * (max - min) / 65535`; level 0 is exactly `min`, 65535
+/// exactly `max`. The `.npy` holds the heights themselves.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HeightmapMeta {
     /// Always "imprint-heightmap".
@@ -47,11 +55,44 @@ pub struct HeightmapMeta {
     pub cell: f32,
     /// [nx, nz]: image width and height.
     pub dims: [u32; 2],
-    /// Height per level, `(max - min) / 65535` (0 for a constant field): the worst round-trip
-    /// error is half of it.
+    /// Height per level, `(max - min) / 65535` (0 for a constant field, and for the exact
+    /// `.npy`): the worst round-trip error is half of it.
     pub quantisation_step: f64,
     /// See [`ORIENTATION`].
     pub orientation: String,
+    /// What a row is in the world ([`ROWS`]; sidecars before it: the same order).
+    #[serde(default)]
+    pub rows: String,
+    /// What a column is in the world ([`COLUMNS`]).
+    #[serde(default)]
+    pub columns: String,
+}
+
+impl HeightmapMeta {
+    /// The sidecar of `hf` written as levels of `quantisation_step` (0: exact heights).
+    fn of(hf: &HeightField, quantisation_step: f64) -> Self {
+        let (min, max) = hf.height_range();
+        HeightmapMeta {
+            format: "imprint-heightmap".into(),
+            version: 1,
+            min,
+            max,
+            origin: hf.origin.to_array(),
+            cell: hf.cell,
+            dims: [hf.dims.x, hf.dims.y],
+            quantisation_step,
+            orientation: ORIENTATION.into(),
+            rows: ROWS.into(),
+            columns: COLUMNS.into(),
+        }
+    }
+
+    /// Writes it beside the file at `path` (before that file, so the file under its final
+    /// name always has its sidecar).
+    fn write_beside(&self, path: &Path) -> Result<()> {
+        let json = serde_json::to_vec_pretty(self).map_err(|e| Error::Run(e.to_string()))?;
+        atomic_write_bytes(&sidecar_path(path), &json)
+    }
 }
 
 /// The sidecar path of a heightmap PNG: `<path>.json` (`a.png` -> `a.png.json`).
@@ -89,19 +130,7 @@ pub fn write_heightmap_png16(path: &Path, hf: &HeightField) -> Result<()> {
         };
         Luma([level])
     });
-    let meta = HeightmapMeta {
-        format: "imprint-heightmap".into(),
-        version: 1,
-        min,
-        max,
-        origin: hf.origin.to_array(),
-        cell: hf.cell,
-        dims: [nx, nz],
-        quantisation_step: range / LEVELS,
-        orientation: ORIENTATION.into(),
-    };
-    let json = serde_json::to_vec_pretty(&meta).map_err(|e| Error::Run(e.to_string()))?;
-    atomic_write_bytes(&sidecar_path(path), &json)?;
+    HeightmapMeta::of(hf, range / LEVELS).write_beside(path)?;
     atomic_write(path, |w| {
         img.write_with_encoder(PngEncoder::new(w))
             .map_err(std::io::Error::other)
@@ -245,10 +274,20 @@ pub fn read_heightmap_exr(path: &Path) -> Result<HeightField> {
     })
 }
 
-/// Writes the heights as a NumPy f32 array of shape `[nz, nx]`, `a[k, i] = get(i, k)`.
+/// Writes the heights as a NumPy f32 array of shape `[nz, nx]`, north up as the pictures
+/// (`a[r, c] = get(c, nz - 1 - r)`), and its sidecar `<path>.json` ([`HeightmapMeta`]).
 pub fn write_heightmap_npy(path: &Path, hf: &HeightField) -> Result<()> {
     hf.validate()?;
-    write_npy_f32(path, &[hf.dims.y as usize, hf.dims.x as usize], &hf.heights)
+    let nx = hf.dims.x as usize;
+    let north_up: Vec<f32> = hf
+        .heights
+        .chunks_exact(nx)
+        .rev()
+        .flatten()
+        .copied()
+        .collect();
+    HeightmapMeta::of(hf, 0.0).write_beside(path)?;
+    write_npy_f32(path, &[hf.dims.y as usize, nx], &north_up)
 }
 
 /// Page and text colours of the preview.
@@ -516,10 +555,19 @@ mod tests {
         let path = dir.path().join("h.npy");
         let hf = bumpy();
         write_heightmap_npy(&path, &hf).unwrap();
+        assert_eq!(only_names(dir.path()), ["h.npy", "h.npy.json"]);
         let (shape, data) = read_npy_f32(&path).unwrap();
         assert_eq!(shape, [4, 7]);
-        assert_eq!(data, hf.heights);
-        assert_eq!(data[2 * 7 + 1], hf.get(1, 2));
+        // North up, as the PNG: row r holds k = nz - 1 - r.
+        for k in 0..4 {
+            for i in 0..7 {
+                assert_eq!(data[(3 - k as usize) * 7 + i as usize], hf.get(i, k));
+            }
+        }
+        let meta: HeightmapMeta =
+            serde_json::from_str(&std::fs::read_to_string(sidecar_path(&path)).unwrap()).unwrap();
+        assert_eq!((meta.rows.as_str(), meta.columns.as_str()), (ROWS, COLUMNS));
+        assert_eq!(meta.quantisation_step, 0.0);
     }
 
     #[test]

@@ -20,6 +20,7 @@ use crate::text::{cap_height, draw_text, fill_rect, text_height, text_width};
 use image::{Rgb, RgbImage};
 use imprint_core::glam::UVec3;
 use imprint_core::{DistanceField, Error, GridSpec, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -38,7 +39,8 @@ pub const MAX_SIDE: u32 = 16384;
 pub const ISO_MIN_PIXELS: u32 = 3;
 
 /// A grid axis; a slice is the plane normal to it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[schemars(rename = "SliceAxis")]
 pub enum Axis {
     X,
     Y,
@@ -66,7 +68,7 @@ impl Axis {
 }
 
 /// Which plane along the axis: resolved against the grid when the field is known.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub enum SliceIndex {
     /// Cell `size / 2`.
     #[default]
@@ -100,15 +102,17 @@ impl SliceIndex {
 }
 
 /// What to draw and how (serde: every field has a default, unknown fields are errors).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct SliceOptions {
     /// The axis the slice is normal to.
     pub axis: Axis,
+    /// Which plane along `axis`: `Middle`, `Cell(i)` or `Fraction(f)`.
     pub index: SliceIndex,
     /// Pixels per cell side; `None` picks the largest that keeps the slice's long side
     /// within [`AUTO_LONG_SIDE`] (at least 1).
     pub pixels_per_cell: Option<u32>,
+    /// Colour map of the distance: 0 at the surface, 1 at the band's edge.
     pub colormap: Colormap,
     /// Thin dark lines where the whole number of cells of distance changes.
     pub iso_lines: bool,

@@ -75,7 +75,7 @@ pub fn objects(plan: &Plan, previous: &[ViewObject]) -> Vec<ViewObject> {
         .map(|r| r.objects.iter().map(from_render).collect())
         .unwrap_or_default();
     let no_render = list.is_empty();
-    for name in &plan.order {
+    for name in &plan.producers {
         let spec = &plan.file.nodes[name];
         let look = match spec.output() {
             Some(PortType::Mesh) => Look::Mesh {

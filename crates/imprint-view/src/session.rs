@@ -306,9 +306,10 @@ impl Session {
 }
 
 /// The plan as the viewer runs it: no writers (nothing is written while watching), and every
-/// node that feeds one still running.
+/// node that feeds one, switched on or not ([`Plan::producers`]).
 pub fn live_plan(plan: &Plan) -> Plan {
     let mut live = plan.clone();
+    live.order = plan.producers.clone();
     live.order.retain(|n| !plan.file.nodes[n].is_writer());
     live
 }

@@ -222,3 +222,25 @@ fn a_saved_asset_rebuilds_the_nodes_that_read_it_and_what_follows() {
         "without a changed asset nothing happens"
     );
 }
+
+/// A file whose only writer is switched off runs nothing offline (its nodes feed only that
+/// writer, so `run` prunes them), yet the viewer still runs and shows them.
+#[test]
+fn the_viewer_runs_what_a_switched_off_writer_would_show() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_pipeline(dir.path());
+    edit_file(
+        &path,
+        "camera: Orbit(target: (0, 0.3, 0), distance: 2.0),",
+        "camera: Orbit(target: (0, 0.3, 0), distance: 2.0), enabled: false,",
+    );
+    let plan = imprint_graph::plan::load(&path, &[]).unwrap();
+    assert!(
+        plan.order.is_empty(),
+        "offline, nothing runs: {:?}",
+        plan.order
+    );
+    let mut s = Session::open(&path, &[], None, None);
+    steps(&mut s, 3);
+    assert_eq!(cloth(&s).len(), 100, "the cloth runs live");
+}

@@ -128,11 +128,17 @@ impl Executor {
         }
         self.versions = c.versions.clone();
         self.next = c.next;
-        let keep = (self.report.adapter.clone(), self.report.threads);
+        // What this program, machine and invocation state, not the checkpoint's writer.
+        let now = std::mem::take(&mut self.report);
         self.report = Report {
             nodes: BTreeMap::new(),
-            adapter: keep.0,
-            threads: keep.1,
+            adapter: now.adapter,
+            threads: now.threads,
+            schema_version: now.schema_version,
+            imprint_version: now.imprint_version,
+            overrides: now.overrides,
+            units: now.units,
+            axes: now.axes,
             ..report
         };
         Ok(())

@@ -21,8 +21,9 @@ use crate::schedule::Schedule;
 use crate::value::{Value, Values};
 use imprint_core::{Aabb, Error};
 use imprint_gpu::GpuContext;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// A running node: its stage, what it last took in, its report.
@@ -70,6 +71,8 @@ pub struct Executor {
     keep_every: u32,
     /// Run a wave's nodes at once (the default), or one after the other in plan order.
     pub(crate) concurrent: bool,
+    /// The files each writer wrote in this run (for the run's manifest).
+    pub(crate) written: BTreeMap<String, BTreeSet<PathBuf>>,
 }
 
 impl Executor {
@@ -95,6 +98,9 @@ impl Executor {
             versions: BTreeMap::new(),
             swept: BTreeMap::new(),
             report: Report {
+                schema_version: crate::report::REPORT_SCHEMA_VERSION,
+                imprint_version: crate::report::program_version(),
+                overrides: plan.overrides.clone(),
                 pipeline: plan.source.name.clone(),
                 fps: plan.file.fps,
                 threads: rayon::current_num_threads(),
@@ -106,6 +112,7 @@ impl Executor {
             kept: BTreeMap::new(),
             keep_every: 0,
             concurrent: true,
+            written: BTreeMap::new(),
         };
         for name in &plan.order {
             let slot = ex.build_slot(name)?;
@@ -290,10 +297,20 @@ impl Executor {
         Ok(t.elapsed().as_secs_f64() * 1e3)
     }
 
+    /// The files each writer wrote in this run so far, by node.
+    pub fn written(&self) -> &BTreeMap<String, BTreeSet<PathBuf>> {
+        &self.written
+    }
+
     /// Whole-run outputs (contact sheets, GIFs) after the last frame; the final report.
     pub fn finish(&mut self) -> crate::Result<Report> {
         for slot in &mut self.slots {
-            self.report.files_written += slot.stage.finish(&mut slot.report)?;
+            let files = slot.stage.finish(&mut slot.report)?;
+            self.report.files_written += files.len();
+            self.written
+                .entry(slot.name.clone())
+                .or_default()
+                .extend(files);
         }
         Ok(self.report())
     }

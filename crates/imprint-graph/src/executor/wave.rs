@@ -114,7 +114,11 @@ impl Executor {
         if step.worked {
             slot.report.record(frame, ms - step.untimed_ms);
         }
-        self.report.files_written += step.files;
+        self.report.files_written += step.files.len();
+        if !step.files.is_empty() {
+            let mine = self.written.entry(slot.name.clone()).or_default();
+            mine.extend(step.files);
+        }
         if moved.uploaded_bytes + moved.read_back_bytes > 0 {
             slot.report.transfers.push(FrameTransfers {
                 frame,

@@ -14,11 +14,12 @@ use imprint_stages::cloth::attach::Attachment;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
 use imprint_stages::cloth::{Body, ClothParams, ClothSim};
 use imprint_stages::drape::{DepthBody, DepthBodyState};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClothNode {
     /// DistanceField nodes the cloth collides with, applied in this order each substep.
@@ -37,6 +38,8 @@ pub struct ClothNode {
     /// (`imprint_stages::cloth::attach`). Without it pins stay where they are.
     #[serde(default)]
     pub pins_follow: Option<String>,
+    /// Where the cloth is stepped: `Auto`, `Cpu` or `Gpu` (distance-field colliders only);
+    /// null: the pipeline's `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
@@ -45,7 +48,7 @@ pub struct ClothNode {
 }
 
 /// A body read through depth maps by a cloth.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DepthColliderNode {
     /// The Mesh node of the body (any closed mesh, possibly deforming).

@@ -10,11 +10,12 @@ use crate::value::{MeshIn, Value};
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
 use imprint_stages::drape::DrapeParams;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DrapeNode {
     /// The Mesh node the garment must not enter (closed; it may deform).

@@ -14,11 +14,12 @@ use imprint_gpu::raster::GpuRasterizer;
 use imprint_stages::ground::GroundGrid;
 use imprint_stages::ground::gpu::GpuGround;
 use imprint_stages::ground::{GroundParams, GroundSim, Initial, Relaxation};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroundNode {
     /// Mesh nodes pressed into the ground every frame (seen from below; the ground does not

@@ -10,11 +10,12 @@ use imprint_core::Error;
 use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
 use imprint_stages::depth::{HeightRegion, HeightView};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct HeightmapNode {
     /// The Mesh node to look at.
@@ -22,16 +23,20 @@ pub struct HeightmapNode {
     /// `Above` (the top surface, default) or `Below` (the underside).
     #[serde(default)]
     pub view: HeightView,
+    /// The x-z cells: fitted to the box the mesh sweeps over the run, or explicit.
     pub grid: HeightGrid,
     /// Height of cells the mesh does not cover.
     #[serde(default)]
     pub empty: f32,
+    /// Where the depth map is rasterised: `Auto`, `Cpu` or `Gpu`; null: the pipeline's
+    /// `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
     /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
     /// frame); consumers reuse the last result in between.
     #[serde(default = "defaults::one")]
     pub every: u32,
+    /// Shifts the `every` cycle: frames where (frame - offset) mod every = 0 are computed.
     #[serde(default)]
     pub offset: u32,
     /// `false` switches this node and everything that reads it off.
@@ -40,19 +45,24 @@ pub struct HeightmapNode {
 }
 
 /// The x-z cells of a Heightmap node.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 pub enum HeightGrid {
     /// Square cells, `resolution` along the longer x/z side of the box the mesh sweeps over
     /// the run, grown by `padding` (a fraction of that side) on every side.
     Fit {
+        /// Number of cells along the longer x/z side of the padded box (at least 1).
         resolution: u32,
+        /// Margin added on every side, as a fraction of the box's longer side (0.1 = 10 %).
         #[serde(default = "defaults::padding")]
         padding: f32,
     },
     /// `origin` is the (x, z) centre of cell (0, 0).
     Explicit {
+        /// (x, z) centre of cell (0, 0), m.
         origin: (f32, f32),
+        /// Side of a square cell, m.
         cell: f32,
+        /// Number of cells along x and z.
         dims: (u32, u32),
     },
 }

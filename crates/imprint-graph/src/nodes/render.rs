@@ -13,18 +13,22 @@ use imprint_gpu::GpuContext;
 use imprint_render::frame::{GroundGrid, Object, RenderOptions, Scene, orbit, render_cpu};
 use imprint_render::gpu_frame::GpuRenderer;
 use imprint_render::sequence::{ContactSheet, GifWriter};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::path::{Path, PathBuf};
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RenderNode {
     /// What to draw, nearest surface wins.
     pub objects: Vec<RenderObject>,
+    /// Where the camera is and where it looks: `Orbit(…)` or `LookAt(…)`.
     pub camera: CameraSpec,
+    /// Image width, pixels.
     #[serde(default = "default_width")]
     pub width: u32,
+    /// Image height, pixels.
     #[serde(default = "default_height")]
     pub height: u32,
     /// Supersampling per axis (1..=4): the CPU renderer's anti-aliasing.
@@ -51,12 +55,13 @@ pub struct RenderNode {
     /// An animated GIF of the rendered frames, playing at the run's speed.
     #[serde(default)]
     pub gif: Option<GifSpec>,
+    /// Where the frames are rendered: `Auto`, `Cpu` or `Gpu`; null: the pipeline's `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
 }
 
 /// Where and how a Render node writes its contact sheet.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ContactSheetSpec {
     /// Path under the run's output folder.
@@ -65,6 +70,7 @@ pub struct ContactSheetSpec {
     /// Take every k-th rendered frame.
     #[serde(default = "four")]
     pub every: u32,
+    /// Thumbnails per row (1..=64).
     #[serde(default = "four")]
     pub columns: u32,
     /// Thumbnail width in pixels.
@@ -73,7 +79,7 @@ pub struct ContactSheetSpec {
 }
 
 /// Where and how a Render node writes its GIF preview.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GifSpec {
     /// Path under the run's output folder.
@@ -116,29 +122,38 @@ fn default_pattern() -> String {
 }
 
 /// One thing a Render node draws.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 pub enum RenderObject {
     /// A Mesh node's mesh, lit, in a linear RGB colour (0..1).
     Mesh {
+        /// The node whose mesh is drawn (a Mesh, Skin, Cloth, Drape, … node).
         mesh: String,
+        /// Surface colour, linear RGB in 0..1.
         #[serde(default = "default_color")]
         color: (f32, f32, f32),
+        /// Overlay the triangle edges as thin dark lines.
         #[serde(default)]
         wireframe: bool,
     },
     /// A plane of a DistanceField node's grid, colour-mapped (0 at the surface, band at the edge).
     FieldSlice {
+        /// The DistanceField node whose grid is sliced.
         field: String,
+        /// The grid axis the slice plane is normal to.
         #[serde(default = "default_axis")]
         axis: imprint_render::slice::Axis,
+        /// Which plane along `axis`: `Middle`, `Cell(i)` or `Fraction(f)`.
         #[serde(default)]
         index: imprint_render::slice::SliceIndex,
     },
     /// A HeightField node's surface through its cell centres, lit like a mesh.
     HeightField {
+        /// The node whose height field is drawn (a Heightmap, Ground, … node).
         heights: String,
+        /// Surface colour, linear RGB in 0..1.
         #[serde(default = "default_ground_color")]
         color: (f32, f32, f32),
+        /// Overlay the triangle edges as thin dark lines.
         #[serde(default)]
         wireframe: bool,
     },
@@ -155,25 +170,34 @@ fn default_axis() -> imprint_render::slice::Axis {
 }
 
 /// Where the camera is. Angles in degrees; `spin` turns an orbit at degrees per second.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 pub enum CameraSpec {
     Orbit {
+        /// The point looked at and orbited, m.
         #[serde(default)]
         target: (f32, f32, f32),
+        /// Distance from `target` to the camera, m (> 0).
         distance: f32,
+        /// Angle above the x-z plane, degrees (not ±90).
         #[serde(default = "default_elevation")]
         elevation: f32,
+        /// Angle around +y, measured from +z toward +x, degrees (at time 0 with `spin`).
         #[serde(default)]
         azimuth: f32,
+        /// Vertical field of view, degrees.
         #[serde(default = "default_fov")]
         fov: f32,
+        /// Turn of the orbit, degrees per second, added to `azimuth` as time passes.
         #[serde(default)]
         spin: f32,
     },
     LookAt {
+        /// Camera position, m.
         eye: (f32, f32, f32),
+        /// The point looked at, m.
         #[serde(default)]
         target: (f32, f32, f32),
+        /// Vertical field of view, degrees.
         #[serde(default = "default_fov")]
         fov: f32,
     },
@@ -421,25 +445,28 @@ impl Stage for RenderStage {
         }
         s.rendered += 1;
         ctx.metric("last", path.display().to_string());
-        Ok(Step::wrote(1))
+        Ok(Step::wrote(vec![path]))
     }
 
-    fn finish(&mut self, report: &mut NodeReport) -> imprint_core::Result<usize> {
-        let mut files = 0;
+    fn finish(&mut self, report: &mut NodeReport) -> imprint_core::Result<Vec<PathBuf>> {
+        let mut files = Vec::new();
         // A node that rendered nothing in this frame range writes no sheet or GIF either.
         if let (Some(s), Some(spec)) = (&self.state.sheet, &self.node.contact_sheet)
             && !s.is_empty()
         {
-            s.write(&self.out.join(&spec.path))?;
-            files += 1;
+            let path = self.out.join(&spec.path);
+            s.write(&path)?;
+            files.push(path);
         }
         if let (Some(g), Some(spec)) = (self.state.gif.take(), &self.node.gif)
             && g.frames() > 0
         {
             g.finish()?;
-            files += 1;
-            let path = self.out.join(&spec.path).display().to_string();
-            report.metrics.insert("gif".into(), path.into());
+            let path = self.out.join(&spec.path);
+            report
+                .metrics
+                .insert("gif".into(), path.display().to_string().into());
+            files.push(path);
         }
         Ok(files)
     }

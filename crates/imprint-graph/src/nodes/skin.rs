@@ -37,6 +37,7 @@ use imprint_stages::skin::measure::joint_measures;
 use imprint_stages::skin::particles::ParticleSkin;
 use imprint_stages::skin::skeleton::Skeleton;
 use imprint_stages::skin::weights::{self, Weights};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value as Json, json};
 use std::any::Any;
@@ -45,7 +46,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The Skin node: which mesh, which rig, which method.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SkinNode {
     /// The Mesh node in the rig's rest pose (its first frame is taken as the rest). Leave it
@@ -85,6 +86,8 @@ pub struct SkinNode {
     /// slide: a planted foot then stands still.
     #[serde(default)]
     pub travel: (f32, f32, f32),
+    /// Where the skinning runs (blends and particles): `Auto`, `Cpu` or `Gpu`; null: the
+    /// pipeline's `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
     /// `false` switches this node and everything that reads it off.
@@ -93,18 +96,22 @@ pub struct SkinNode {
 }
 
 /// How a Skin node deforms its mesh.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 pub enum SkinMethod {
     /// Tokoi's particle skinning: `imprint_stages::skin::particles::ParticleParams`.
     Particles(#[serde(default)] imprint_stages::skin::particles::ParticleParams),
     /// Linear blend skinning: the rig file's weights (glTF), or automatic ones (`weights:
     /// Distance(power: 4)`, the default for a rig RON).
     Linear {
+        /// Automatic weights, e.g. `Distance(power: 4)`; null: the rig file's own weights
+        /// (glTF), else `Distance(power: 4)`.
         #[serde(default)]
         weights: Option<imprint_stages::skin::weights::WeightMethod>,
     },
     /// Dual quaternion skinning, weighted as `Linear`.
     DualQuaternion {
+        /// Automatic weights, e.g. `Distance(power: 4)`; null: the rig file's own weights
+        /// (glTF), else `Distance(power: 4)`.
         #[serde(default)]
         weights: Option<imprint_stages::skin::weights::WeightMethod>,
     },

@@ -13,11 +13,12 @@ use imprint_gpu::GpuContext;
 use imprint_gpu::raster::GpuRasterizer;
 use imprint_stages::snow::gpu::{GpuSnowArrival, GpuSnowRelax};
 use imprint_stages::snow::{SnowParams, SnowSim, flat_ground};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SnowNode {
     /// Mesh nodes the snow falls on; each also shades the others (and the ground).
@@ -39,7 +40,7 @@ pub struct SnowNode {
 
 /// The flat ground a `Snow` node collects snow on (cells as a `Ground` node's, so a Ground
 /// with the same grid can take the snow in with `accumulate`).
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SnowGround {
     /// Extent along x and z, m.

@@ -10,15 +10,17 @@ use imprint_core::{BoundaryVariant, Error, GridSpec};
 use imprint_gpu::GpuContext;
 use imprint_stages::voxel::cpu::Voxelizer;
 use imprint_stages::voxel::solid::ClosedCache;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct VoxelizeNode {
     /// The Mesh node to voxelise.
     pub mesh: String,
+    /// The cells: fitted to the box the mesh sweeps over the run, or explicit.
     pub grid: GridChoice,
     /// `Closest` (sub-voxel, default) or `Centre` (H's voxel centres).
     #[serde(default)]
@@ -28,12 +30,14 @@ pub struct VoxelizeNode {
     /// has an inside: an open one gives an unsigned field, and the report says so.
     #[serde(default = "defaults::yes")]
     pub signed: bool,
+    /// Where the voxelisation runs: `Auto`, `Cpu` or `Gpu`; null: the pipeline's `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
     /// Compute on frames where (frame - offset) mod every = 0 (and on the run's first
     /// frame); consumers reuse the last result in between.
     #[serde(default = "defaults::one")]
     pub every: u32,
+    /// Shifts the `every` cycle: frames where (frame - offset) mod every = 0 are computed.
     #[serde(default)]
     pub offset: u32,
     /// `false` switches this node and everything that reads it off.
@@ -42,19 +46,24 @@ pub struct VoxelizeNode {
 }
 
 /// The grid a Voxelize node works on.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 pub enum GridChoice {
     /// Cubic cells, `resolution` along the longest side of the box the mesh sweeps over the run,
     /// grown by `padding` (a fraction of that side) on every side. The grid stays fixed.
     Fit {
+        /// Number of cells along the longest side of the padded box (at least 1).
         resolution: u32,
+        /// Margin added on every side, as a fraction of the box's longest side (0.1 = 10 %).
         #[serde(default = "defaults::padding")]
         padding: f32,
     },
     /// An explicit grid: `origin` is the centre of cell (0, 0, 0).
     Explicit {
+        /// Centre of cell (0, 0, 0), m.
         origin: (f32, f32, f32),
+        /// Side of a cubic cell, m.
         cell: f32,
+        /// Number of cells along x, y and z.
         dims: (u32, u32, u32),
     },
 }

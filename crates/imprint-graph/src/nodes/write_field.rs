@@ -6,11 +6,12 @@ use crate::schema::defaults;
 use crate::value::FieldIn;
 use imprint_core::DistanceField;
 use imprint_render::slice::SliceOptions;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::path::{Path, PathBuf};
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WriteFieldNode {
     /// The DistanceField node to write.
@@ -84,28 +85,28 @@ impl Stage for WriteFieldStage {
         }
         let field = ctx.values.field(&self.input)?.cpu(ctx.gpu)?;
         let (name, frame) = (self.input.node(), ctx.frame);
-        let mut n = 0;
+        let mut files = Vec::new();
         if self.npy {
-            n += imprint_render::field_io::write_field(&self.dir, name, frame, &field)?.len();
+            files = imprint_render::field_io::write_field(&self.dir, name, frame, &field)?;
         }
         for s in &self.slices {
-            write_slice(&self.dir, name, frame, &field, s)?;
-            n += 1;
+            files.push(write_slice(&self.dir, name, frame, &field, s)?);
         }
         ctx.metric("dir", self.dir.display().to_string());
-        ctx.count("files", n as u64);
-        Ok(Step::wrote(n))
+        ctx.count("files", files.len() as u64);
+        Ok(Step::wrote(files))
     }
 }
 
-/// Writes `DIR/<field>_<frame:04>_<axis><index>.png`, titled with the field and frame.
+/// Writes `DIR/<field>_<frame:04>_<axis><index>.png`, titled with the field and frame;
+/// returns its path.
 fn write_slice(
     dir: &Path,
     field_name: &str,
     frame: u32,
     field: &DistanceField,
     opts: &SliceOptions,
-) -> imprint_core::Result<()> {
+) -> imprint_core::Result<PathBuf> {
     let index = opts.resolve_index(&field.spec)?;
     let mut opts = opts.clone();
     if opts.title.is_none() {
@@ -115,5 +116,6 @@ fn write_slice(
         "{field_name}_{frame:04}_{}{index}.png",
         opts.axis.letter()
     ));
-    imprint_render::slice::write_field_slice(&path, field, &opts)
+    imprint_render::slice::write_field_slice(&path, field, &opts)?;
+    Ok(path)
 }

@@ -6,11 +6,12 @@ use crate::schedule::Schedule;
 use crate::schema::defaults;
 use crate::value::HeightsIn;
 use imprint_render::heightmap as hm;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::path::PathBuf;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WriteHeightmapNode {
     /// The HeightField node to write.
@@ -33,14 +34,17 @@ pub struct WriteHeightmapNode {
 }
 
 /// File formats of `WriteHeightmap`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize, JsonSchema,
+)]
 pub enum HeightmapFormat {
     /// 16-bit grayscale PNG, heights mapped to the full range; the range is in a JSON
     /// sidecar so the file reads back to within one quantisation step.
     Png16,
     /// Single-channel 32-bit float OpenEXR (channel "Y"): exact heights.
     Exr,
-    /// NumPy `.npy`, f32, shape (nz, nx): exact heights.
+    /// NumPy `.npy`, f32, shape (nz, nx), north up as the PNG: exact heights, with the same
+    /// JSON sidecar.
     Npy,
     /// 8-bit colour-mapped picture with a legend, for people.
     Preview,
@@ -103,19 +107,22 @@ impl Stage for WriteHeightmapStage {
         }
         let hf = ctx.values.heights(&self.input)?;
         let stem = format!("{}_{:04}", self.input.node(), ctx.frame);
-        let mut files = 0;
+        let mut files = Vec::new();
         for f in &self.formats {
-            let path = |ext: &str| self.dir.join(format!("{stem}{ext}"));
-            match f {
-                HeightmapFormat::Png16 => {
-                    hm::write_heightmap_png16(&path(".png"), hf)?;
-                    files += 1; // and its JSON sidecar
-                }
-                HeightmapFormat::Exr => hm::write_heightmap_exr(&path(".exr"), hf)?,
-                HeightmapFormat::Npy => hm::write_heightmap_npy(&path(".npy"), hf)?,
-                HeightmapFormat::Preview => hm::write_heightmap_preview(&path("_preview.png"), hf)?,
+            type Write =
+                fn(&std::path::Path, &imprint_core::HeightField) -> imprint_core::Result<()>;
+            let (ext, write): (&str, Write) = match f {
+                HeightmapFormat::Png16 => (".png", hm::write_heightmap_png16),
+                HeightmapFormat::Exr => (".exr", hm::write_heightmap_exr),
+                HeightmapFormat::Npy => (".npy", hm::write_heightmap_npy),
+                HeightmapFormat::Preview => ("_preview.png", hm::write_heightmap_preview),
+            };
+            let path = self.dir.join(format!("{stem}{ext}"));
+            write(&path, hf)?;
+            if matches!(f, HeightmapFormat::Png16 | HeightmapFormat::Npy) {
+                files.push(hm::sidecar_path(&path));
             }
-            files += 1;
+            files.push(path);
         }
         ctx.metric("dir", self.dir.display().to_string());
         Ok(Step::wrote(files))

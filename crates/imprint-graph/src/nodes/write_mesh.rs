@@ -25,11 +25,12 @@ use crate::schedule::Schedule;
 use crate::schema::defaults;
 use crate::value::{MeshIn, Values};
 use imprint_render::mesh_io::{MeshSequence, write_glb};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::path::PathBuf;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WriteMeshNode {
     /// The Mesh node to write.
@@ -37,6 +38,7 @@ pub struct WriteMeshNode {
     /// Folder under the run's output folder (default: the node's name).
     #[serde(default)]
     pub dir: Option<String>,
+    /// File format: `Obj` or `Ply` (a file per frame), or `Glb` (one animated file per run).
     #[serde(default)]
     pub format: MeshFormat,
     /// Write every k-th frame (1 = every frame).
@@ -52,7 +54,7 @@ pub struct WriteMeshNode {
 
 /// File format of `WriteMesh`: OBJ (positions, normals, UVs where they exist) or binary PLY,
 /// a file per frame; or `Glb`, one animated glTF binary of the whole run (see the module).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 pub enum MeshFormat {
     #[default]
     Obj,
@@ -136,18 +138,18 @@ impl Stage for WriteMeshStage {
                     .map_err(|e| ctx.at_node(e))?;
                 ctx.metric("glb_frames", self.sequence.len());
                 // Kept, not written yet: the file is written by `finish`.
-                return Ok(Step::wrote(0));
+                return Ok(Step::wrote(Vec::new()));
             }
         };
         ctx.metric("last", path.display().to_string());
         ctx.count("files", 1);
-        Ok(Step::wrote(1))
+        Ok(Step::wrote(vec![path]))
     }
 
-    fn finish(&mut self, report: &mut NodeReport) -> imprint_core::Result<usize> {
+    fn finish(&mut self, report: &mut NodeReport) -> imprint_core::Result<Vec<PathBuf>> {
         // A node that kept no frame in this run's range writes no file.
         if self.format != MeshFormat::Glb || self.sequence.is_empty() {
-            return Ok(0);
+            return Ok(Vec::new());
         }
         let path = self.glb_path();
         write_glb(&path, &self.sequence, self.fps, self.input.node())?;
@@ -159,7 +161,7 @@ impl Stage for WriteMeshStage {
         let metrics = &mut report.metrics;
         metrics.insert("glb".into(), path.display().to_string().into());
         metrics.insert("glb_layout".into(), layout.into());
-        Ok(1)
+        Ok(vec![path])
     }
 
     fn save(&self, _values: &Values) -> imprint_core::Result<Vec<u8>> {

@@ -32,7 +32,7 @@
 //!
 //! **Response.** Closer than ε (or inside), the particle moves along the outward normal to
 //! distance ε (eq. 11), then a fraction b of the substep's tangential displacement is
-//! cancelled (eq. 12, as METHODS reads it).
+//! cancelled (eq. 12, as docs/methods.md reads it).
 
 use super::sampler::{FieldView, Read};
 use glam::{Vec3, Vec4};

@@ -6,9 +6,11 @@
 //! then rotates the three position buffers. Nothing a particle computes depends on which
 //! thread runs it or how the work is split, and every sum (energies, counts) is taken per
 //! fixed-size chunk and then over chunks in order, so a run gives the same bytes on 1 or
-//! 16 threads. The arrays are flat `Vec4`s and CSR lists, the layout the GPU path will bind.
+//! 16 threads. The arrays are flat `Vec4`s and CSR lists, the layout the GPU path will bind;
+//! the springs are also read by blocks of eight particles ([`super::lanes`]), same bits.
 
 use super::contact::{self, Collider, Hit};
+use super::lanes::{Blocks, LANES, Lanes};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::FieldView;
@@ -27,8 +29,9 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Particles per parallel task (and per partial sum). Fixed, so sums do not depend on the
-/// number of threads.
+/// number of threads; whole blocks of [`LANES`].
 const CHUNK: usize = 256;
+const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 /// Lengths below this count as zero when normalising a spring (coincident particles).
 const TINY: f32 = 1e-20;
@@ -122,7 +125,9 @@ struct FramePass {
 
 /// Everything a particle's update reads, for one substep.
 struct Substep<'a> {
-    links: &'a Links,
+    /// The springs by blocks of eight particles, and the positions they read.
+    blocks: &'a Blocks,
+    at: &'a Lanes,
     hinges: &'a Hinges,
     faces: &'a Faces,
     pin_slot: &'a [u32],
@@ -156,6 +161,14 @@ pub struct ClothSim {
     node: String,
     shape: ClothShape,
     links: Links,
+    /// `links` by blocks of eight particles, rebuilt from them after loading.
+    #[serde(skip)]
+    blocks: Blocks,
+    /// The positions (`state.pos`) and next positions as the blocks read them, within a frame.
+    #[serde(skip)]
+    lanes: Lanes,
+    #[serde(skip)]
+    lanes_next: Lanes,
     hinges: Hinges,
     faces: Faces,
     pinned: Vec<u32>,
@@ -266,6 +279,9 @@ impl ClothSim {
         Ok(ClothSim {
             params: params.clone(),
             node: "cloth".into(),
+            blocks: Blocks::build(&links, n),
+            lanes: Lanes::default(),
+            lanes_next: Lanes::default(),
             links,
             hinges,
             faces,
@@ -552,6 +568,15 @@ impl ClothSim {
                 + wind2 as f64
                 + (scale / dt_frame as f64).powi(2));
         let ke_limit = self.params.limits.energy_growth as f64 * ke_start.max(energy_scale);
+        let n = self.len();
+        if !self.blocks.fits(n) {
+            self.blocks = Blocks::build(&self.links, n);
+        }
+        self.lanes.resize(n);
+        self.lanes_next.resize(n);
+        for (i, p) in self.state.pos.iter().enumerate() {
+            (self.lanes.x[i], self.lanes.y[i], self.lanes.z[i]) = (p.x, p.y, p.z);
+        }
 
         let mut frame_stats = SubstepStats::new();
         let mut last = SubstepStats::new();
@@ -620,7 +645,8 @@ impl ClothSim {
             _ => 1.0,
         };
         let ctx = Substep {
-            links: &self.links,
+            blocks: &self.blocks,
+            at: &self.lanes,
             hinges: &self.hinges,
             faces: &self.faces,
             pin_slot: &self.pin_slot,
@@ -641,14 +667,22 @@ impl ClothSim {
         };
         let nf = colliders.len().max(1);
         let (pos, prev) = (&self.state.pos, &self.state.prev);
+        let out = &mut self.lanes_next;
         self.next
             .par_chunks_mut(CHUNK)
             .zip(self.side.par_chunks_mut(CHUNK * nf))
             .zip(self.stats.par_iter_mut())
+            .zip(out.x.par_chunks_mut(CHUNK))
+            .zip(out.y.par_chunks_mut(CHUNK))
+            .zip(out.z.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(c, ((next, side), stats))| {
+            .for_each(|(c, (((((next, side), stats), x), y), z))| {
                 let mut st = SubstepStats::new();
                 update_chunk(c * CHUNK, &ctx, pos, prev, next, side, &mut st);
+                // The new positions as the next substep's blocks read them.
+                for (k, p) in next.iter().enumerate() {
+                    (x[k], y[k], z[k]) = (p.x, p.y, p.z);
+                }
                 *stats = st;
             });
         let mut total = SubstepStats::new();
@@ -659,6 +693,7 @@ impl ClothSim {
         total.max_accel = total.max_accel.sqrt() / (dt * dt);
         std::mem::swap(&mut self.state.prev, &mut self.state.pos);
         std::mem::swap(&mut self.state.pos, &mut self.next);
+        std::mem::swap(&mut self.lanes, &mut self.lanes_next);
         self.dt_prev = Some(dt);
         total
     }
@@ -940,22 +975,20 @@ fn update_chunk(
     st: &mut SubstepStats,
 ) {
     let nf = ctx.colliders.len().max(1);
-    let quad = ctx.links.law == SpringLaw::Quadratic;
     let pinned = |i: usize| ctx.pin_slot[i] != u32::MAX;
-    for (k, out) in next.iter_mut().enumerate() {
-        let i = base + k;
-        let (mut f, over) = if quad {
-            spring_force::<true>(i, ctx.links, pos, ctx.max_stretch)
-        } else {
-            spring_force::<false>(i, ctx.links, pos, ctx.max_stretch)
-        };
-        if over {
-            st.overstretched = st.overstretched.min(i as u32);
+    for (b, out) in next.chunks_mut(LANES).enumerate() {
+        let ([fx, fy, fz], over) = ctx.blocks.forces(base / LANES + b, ctx.at, ctx.max_stretch);
+        for (m, out) in out.iter_mut().enumerate() {
+            let i = base + b * LANES + m;
+            if over >> m & 1 == 1 {
+                st.overstretched = st.overstretched.min(i as u32);
+            }
+            let mut f = Vec3::new(fx[m], fy[m], fz[m]);
+            if !ctx.hinges.hinges.is_empty() {
+                f += hinge_force(i, ctx.hinges, pos);
+            }
+            *out = f.extend(0.0);
         }
-        if !ctx.hinges.hinges.is_empty() {
-            f += hinge_force(i, ctx.hinges, pos);
-        }
-        *out = f.extend(0.0);
     }
     for (k, out) in next.iter_mut().enumerate() {
         *out = integrate(base + k, ctx, pos, prev, *out);

@@ -5,8 +5,8 @@
 //!   its validation;
 //! - [`shape`]: the rest particles and faces of a grid or a garment mesh;
 //! - [`springs`]: springs (H eq. 9 or T eq. 1), hinges (T eq. 2), faces, stored per
-//!   particle (CSR) so that each particle gathers its own forces; [`texture`]: T eq. 5's
-//!   anisotropy map;
+//!   particle (CSR) so that each particle gathers its own forces; [`lanes`]: the same
+//!   springs eight particles at a time (SIMD); [`texture`]: T eq. 5's anisotropy map;
 //! - [`cpu`]: the simulator, [`ClothSim`]: damped Verlet (H eq. 10) in substeps (H §5.2),
 //!   deterministic on any number of threads; [`contact`]: projection out of the bodies with
 //!   friction (H eq. 11-12), which side of an unsigned field a particle is on, and the fields
@@ -39,6 +39,7 @@ pub mod attach;
 pub mod contact;
 pub mod cpu;
 pub mod gpu;
+pub mod lanes;
 pub mod metrics;
 pub mod params;
 pub mod sampler;

@@ -6,10 +6,11 @@
 
 use glam::Vec3;
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Everything the cloth stage needs besides its colliders (the distance fields of the frame).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClothParams {
     /// The rest shape: a procedural grid or a garment mesh.
@@ -28,6 +29,7 @@ pub struct ClothParams {
     pub damping: f32,
     /// Acceleration of gravity, m/s².
     #[serde(default = "default_gravity")]
+    #[schemars(with = "[f32; 3]")]
     pub gravity: Vec3,
     /// Air drag against the cloth's faces; none when omitted.
     #[serde(
@@ -35,6 +37,7 @@ pub struct ClothParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "Wind")]
     pub wind: Option<Wind>,
     /// Particles held in place (exactly, bit for bit) or led by [`super::ClothSim::set_pin_targets`].
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -56,7 +59,7 @@ pub struct ClothParams {
 }
 
 /// The rest shape.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Shape {
     /// A flat rectangle of `resolution[0] x resolution[1]` particles, `size[0]` wide along its
@@ -65,11 +68,17 @@ pub enum Shape {
     /// Axes: v is world +y projected onto the plane (so a curtain's "up" is up), or -z when
     /// `normal` is (anti)parallel to y; u = v x normal. UVs run 0..1 along u (warp) and v (weft).
     Grid {
+        /// Width along u and height along v, metres.
         size: [f32; 2],
+        /// Particles along u and along v (at least 2 each).
         resolution: [u32; 2],
+        /// The rectangle's centre, metres (default the origin).
         #[serde(default)]
+        #[schemars(with = "[f32; 3]")]
         center: Vec3,
+        /// The direction the rectangle faces (default +y: lying flat).
         #[serde(default = "default_normal")]
+        #[schemars(with = "[f32; 3]")]
         normal: Vec3,
     },
     /// A garment mesh file (relative to the pipeline file's folder; OBJ, PLY, STL or glTF, as
@@ -77,44 +86,58 @@ pub enum Shape {
     /// particle (OBJ splits them at UV seams); every unique edge becomes a structural spring
     /// and each pair of triangles sharing an edge a shear spring between their opposite
     /// vertices. UVs are kept for the anisotropy lookup and the output.
-    Mesh { path: String },
+    Mesh {
+        /// The garment file, relative to the pipeline file's folder.
+        path: String,
+    },
 }
 
 /// The spring model.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(rename = "ClothMaterial")]
 #[serde(deny_unknown_fields)]
 pub enum Material {
     /// H eq. 9: linear springs f = k (|x| - l) to the 4 structural and 4 shear neighbours;
     /// `k_bend` adds skip-one springs (grids only; H omits them for speed).
     Harada {
+        /// Stiffness of the springs to the 4 grid (or edge) neighbours, N/m (or N per unit
+        /// strain with `stiffness_mode: Strain`).
         k_structural: f32,
+        /// Stiffness of the diagonal springs, N/m (or per unit strain).
         k_shear: f32,
+        /// Stiffness of the skip-one bending springs, N/m (none when left out; grids only).
         #[serde(
             default,
             with = "crate::bare_option",
             skip_serializing_if = "Option::is_none"
         )]
+        #[schemars(with = "f32")]
         k_bend: Option<f32>,
     },
     /// T eq. 1, 2, 5: quadratic springs f = a (r - L)² in compression and b (r - L)² in
     /// stretch (structural and shear alike), hinge bending f = c (cos θ - 1) / d across each
     /// pair of triangles, and an optional texture scaling each spring by its direction.
     Tokoi {
+        /// a: the quadratic law's constant in compression, N/m² (or per unit strain²).
         a_compress: f32,
+        /// b: the quadratic law's constant in stretch, N/m² (or per unit strain²).
         b_stretch: f32,
+        /// c: the hinge bending constant across each pair of triangles, N·m (default 0: none).
         #[serde(default)]
         bend_c: f32,
+        /// A texture scaling each spring by its direction (none when left out).
         #[serde(
             default,
             with = "crate::bare_option",
             skip_serializing_if = "Option::is_none"
         )]
+        #[schemars(with = "Anisotropy")]
         anisotropy: Option<Anisotropy>,
     },
 }
 
 /// How the spring constants in [`Material`] are stated.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum StiffnessMode {
     /// Per spring, whatever its length: f = k (r - l) (H eq. 9), f = b (r - L)² (T eq. 1).
     #[default]
@@ -127,11 +150,12 @@ pub enum StiffnessMode {
 /// T eq. 5: an RGBA texture whose channels scale the springs by direction, read at the
 /// spring's midpoint UV: R = Ka (warp, u), G = Kb (weft, v), B = Kc (diagonal +u+v),
 /// A = Kd (diagonal +u-v). A spring's multiplier is `scale * channel / 255`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Anisotropy {
     /// PNG file, relative to the pipeline file's folder.
     pub texture: String,
+    /// Multiplier of every channel (a channel of 255 scales its springs by `scale`).
     #[serde(default = "default_one")]
     pub scale: f32,
 }
@@ -139,10 +163,11 @@ pub struct Anisotropy {
 /// Drag of the air on the faces: each particle gets `drag * (n̂ · (velocity - v)) * N`, with
 /// N its share of the adjacent faces' area vectors (a third of each), n̂ = N / |N| and v its
 /// own velocity. Linear in the relative speed (a light, slow cloth), so no square to blow up.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Wind {
     /// Air velocity, m/s.
+    #[schemars(with = "[f32; 3]")]
     pub velocity: Vec3,
     /// Force per unit area per unit of normal relative speed, N·s/m³ (= kg/(m²·s)).
     #[serde(default = "default_drag")]
@@ -150,19 +175,26 @@ pub struct Wind {
 }
 
 /// Particles that do not integrate: they stay exactly where they are, or follow targets.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub enum Pin {
     /// Particle indices (grids: `i + nx * j`, i along u; meshes: welded-particle order).
     Indices(Vec<u32>),
     /// Every particle whose rest position lies in the box.
-    Region { min: Vec3, max: Vec3 },
+    Region {
+        /// The box's lowest corner, metres.
+        #[schemars(with = "[f32; 3]")]
+        min: Vec3,
+        /// The box's highest corner, metres.
+        #[schemars(with = "[f32; 3]")]
+        max: Vec3,
+    },
     /// Grids: the row at the +v edge (the top of a curtain). Meshes: the particles at the
     /// highest y, within 1e-4 of the mesh's extent.
     TopEdge,
 }
 
 /// H §5.1: contact with the distance fields.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Collision {
     /// A particle closer than ε to a body is moved back to distance ε along the field's
@@ -179,11 +211,12 @@ pub struct Collision {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "f32")]
     pub ground: Option<f32>,
 }
 
 /// When a run is stopped with `Error::Numerical` rather than continued.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Limits {
     /// A spring longer than this many times its rest length means the integration exploded.

@@ -54,6 +54,11 @@ impl<'a> FieldView<'a> {
         let spec = &self.field.spec;
         let (b, t) = cell_coords(spec, p);
         if b.cmplt(IVec3::ZERO).any() || (b + 1).cmpge(self.dims).any() {
+            if b.cmplt(IVec3::splat(-1)).any() || b.cmpge(self.dims).any() {
+                // A cell or more outside the grid, where most of a cloth larger than the
+                // field is: the field's nearest cell is off the grid too, so it reads far.
+                return self.far();
+            }
             return read_outside(self.field, p);
         }
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
@@ -107,6 +112,20 @@ impl<'a> FieldView<'a> {
         Read {
             sample: finish(dist, vec, false),
             side,
+        }
+    }
+
+    /// What the field reads off its grid (`DistanceField::sample` and `side` there).
+    #[inline(always)]
+    fn far(&self) -> Read {
+        let far = self.field.far_value();
+        Read {
+            sample: FieldSample {
+                distance: far,
+                vector: Vec3::ZERO,
+                in_band: false,
+            },
+            side: self.signs.map(|_| far),
         }
     }
 }
@@ -241,6 +260,7 @@ mod tests {
             let want = f.sample(p, Sampling::Vector);
             assert_same(sample_vector(f, p), want, p);
             assert_same(view.sample(p), want, p);
+            assert_eq!(view.read(p).side, f.side(p), "{p}");
         }
         // The cells are the field's vectors and distances.
         for i in (0..f.spec.len()).step_by(7) {

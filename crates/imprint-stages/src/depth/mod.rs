@@ -2,7 +2,7 @@
 //! ([`HeightView::Above`]: its top surface, what snow settles on) or straight up
 //! ([`HeightView::Below`]: its underside, what presses into the ground), one pixel per
 //! height-field cell. This is the depth-buffer trick of Tokoi's and Onoue's methods
-//! (METHODS §4, §5, §7): one rasterisation answers "how high is the body over each cell".
+//! (docs/methods.md §4, §5, §7): one rasterisation answers "how high is the body over each cell".
 //!
 //! The camera is placed so that pixel centres fall exactly on cell centres: pixel (i, j)
 //! of an `Above` view is cell (i, j); a `Below` view sees the world mirrored in x, so its
@@ -16,10 +16,11 @@ use glam::{UVec2, Vec2, Vec3};
 use imprint_core::geom::Aabb;
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{Camera, Error, GridSpec, HeightField, Mesh, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Which side of the mesh the height field records.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 pub enum HeightView {
     /// Looking down: the highest surface over each cell.
     #[default]

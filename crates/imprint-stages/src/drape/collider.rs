@@ -72,14 +72,16 @@ use glam::Vec3;
 use imprint_core::raster::{DepthMap, RasterOptions};
 use imprint_core::{Aabb, Camera, Mesh, Result};
 use rayon::prelude::*;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// A body the cloth collides with through depth maps, as a pipeline file states it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct DepthColliderParams {
     /// The directions the views look along (as [`super::DrapeParams::views`]); a direction
     /// and its opposite give the same view. Default T's top, front and back.
+    #[schemars(with = "Vec<[f32; 3]>")]
     pub views: Vec<Vec3>,
     /// Side of the square depth maps, pixels. Default 256.
     pub resolution: u32,

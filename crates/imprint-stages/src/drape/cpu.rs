@@ -3,13 +3,14 @@
 //! [`super`] for the method and the definitions).
 
 use super::collider::distinct_lines;
-use super::inside::InsideTest;
+use super::inside::{InsideTest, Lines};
 use super::params::{DrapeParams, Fallback};
 use crate::snow::arrival::{Lookup, snow_camera};
 use glam::Vec3;
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{BoundaryVariant, DistanceField, GridSpec, Mesh, Result, Sampling};
 use rayon::prelude::*;
+use std::sync::{Arc, Mutex};
 
 /// What one call did.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
@@ -100,21 +101,94 @@ impl View {
     }
 }
 
+/// What a drape reads of the body: the maps per distinct view line and the inside test.
+struct Prepared {
+    views: Vec<View>,
+    test: InsideTest,
+    /// The largest texel of the maps, m.
+    texel: f32,
+}
+
+/// The body [`drape_cpu`] prepared last, with what identifies it: its positions (as bits)
+/// and triangles, the map resolution and the distinct view lines. A pipeline with a static
+/// body re-drapes every frame; the maps and the inside test depend on nothing else.
+struct Cached {
+    positions: Vec<[u32; 3]>,
+    triangles: Vec<[u32; 3]>,
+    resolution: u32,
+    lines: Vec<[u32; 3]>,
+    prepared: Arc<Prepared>,
+}
+
+impl Cached {
+    fn is_for(&self, body: &Mesh, resolution: u32, lines: &[[u32; 3]]) -> bool {
+        self.resolution == resolution
+            && self.lines == lines
+            && self.triangles == body.triangles
+            && self.positions.len() == body.positions.len()
+            && self
+                .positions
+                .iter()
+                .zip(&body.positions)
+                .all(|(a, b)| *a == b.to_array().map(f32::to_bits))
+    }
+}
+
+/// One body, the last one prepared (a few MB at 512²: the maps and the triangle bins).
+static LAST_BODY: Mutex<Option<Cached>> = Mutex::new(None);
+
 /// The one-shot fit on the CPU: pushes the garment's vertices out of the body in place and
 /// reports what it did. The body should be closed (see the module doc); the garment is any
 /// set of points (a mesh's positions, a cloth's particles).
+///
+/// The maps and the inside test of the last body are kept: a call on a body with the same
+/// positions and triangles (and the same resolution and view lines) reuses them, with the
+/// same result as a fresh call ([`drape_with`] always prepares afresh).
 pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Result<DrapeReport> {
-    drape_with(body, garment, params, rasterize_depth_with)
+    params.validate()?;
+    if garment.is_empty() || body.triangles.is_empty() || body.bounds().is_empty() {
+        return fit(None, body, garment, params);
+    }
+    let lines: Vec<[u32; 3]> = distinct_lines(&params.views)
+        .iter()
+        .map(|v| v.to_array().map(f32::to_bits))
+        .collect();
+    let res = params.resolution;
+    let kept = {
+        let last = LAST_BODY.lock().unwrap_or_else(|e| e.into_inner());
+        last.as_ref()
+            .filter(|c| c.is_for(body, res, &lines))
+            .map(|c| c.prepared.clone())
+    };
+    let prepared = match kept {
+        Some(p) => p,
+        None => {
+            let p = Arc::new(prepare(body, params, rasterize_depth_with)?);
+            *LAST_BODY.lock().unwrap_or_else(|e| e.into_inner()) = Some(Cached {
+                positions: body
+                    .positions
+                    .iter()
+                    .map(|v| v.to_array().map(f32::to_bits))
+                    .collect(),
+                triangles: body.triangles.clone(),
+                resolution: res,
+                lines,
+                prepared: p.clone(),
+            });
+            p
+        }
+    };
+    fit(Some(&prepared), body, garment, params)
 }
 
 /// [`drape_cpu`] with the depth maps from any rasteriser with the signature of
 /// `imprint_core::raster::rasterize_depth_with` (the GPU one is a closure over its context);
-/// the pushes and the inside test run on the CPU.
+/// the pushes and the inside test run on the CPU. Nothing is kept between calls.
 pub fn drape_with(
     body: &Mesh,
     garment: &mut [Vec3],
     params: &DrapeParams,
-    mut rasterize: impl FnMut(
+    rasterize: impl FnMut(
         &Mesh,
         &imprint_core::camera::Camera,
         u32,
@@ -123,14 +197,26 @@ pub fn drape_with(
     ) -> Result<DepthMap>,
 ) -> Result<DrapeReport> {
     params.validate()?;
-    let mut report = DrapeReport {
-        vertices: garment.len(),
-        ..Default::default()
-    };
-    let bounds = body.bounds();
-    if garment.is_empty() || body.triangles.is_empty() || bounds.is_empty() {
-        return Ok(report);
+    if garment.is_empty() || body.triangles.is_empty() || body.bounds().is_empty() {
+        return fit(None, body, garment, params);
     }
+    let prepared = prepare(body, params, rasterize)?;
+    fit(Some(&prepared), body, garment, params)
+}
+
+/// The maps of a body with triangles and a non-empty box, and its inside test.
+fn prepare(
+    body: &Mesh,
+    params: &DrapeParams,
+    mut rasterize: impl FnMut(
+        &Mesh,
+        &imprint_core::camera::Camera,
+        u32,
+        u32,
+        &RasterOptions,
+    ) -> Result<DepthMap>,
+) -> Result<Prepared> {
+    let bounds = body.bounds();
     let res = params.resolution;
     // The inside test is built while the maps are rendered: its three axes do not share two
     // threads evenly, the renders fill the gap. (The rasteriser may not be `Send`, so the
@@ -162,43 +248,71 @@ pub fn drape_with(
         Ok::<_, imprint_core::Error>(views)
     })?;
     let test = test.expect("the scope ran the build");
-    for v in &views {
-        report.texel = report.texel.max(v.front_look.texel).max(v.back_look.texel);
-    }
-    let texel = report.texel;
+    let texel = views.iter().fold(0f32, |t, v| {
+        t.max(v.front_look.texel).max(v.back_look.texel)
+    });
+    Ok(Prepared { views, test, texel })
+}
+
+/// The pushes of the garment's vertices out of the prepared body (`None`: nothing to fit:
+/// no garment, or a body without triangles or box).
+fn fit(
+    prepared: Option<&Prepared>,
+    body: &Mesh,
+    garment: &mut [Vec3],
+    params: &DrapeParams,
+) -> Result<DrapeReport> {
+    let mut report = DrapeReport {
+        vertices: garment.len(),
+        ..Default::default()
+    };
+    let Some(Prepared { views, test, texel }) = prepared else {
+        return Ok(report);
+    };
+    report.texel = *texel;
+    let texel = *texel;
     let offset = params.offset;
 
-    // Per vertex: None = outside (untouched); Some(Ok(new)) = resolved; Some(Err(())) =
-    // inside and unresolved by the views.
-    let outcome: Vec<Option<std::result::Result<Vec3, ()>>> = garment
+    // Per vertex: None = outside (untouched); Some(Ok((new, inside there))) = resolved;
+    // Some(Err(())) = inside and unresolved by the views.
+    let outcome: Vec<Option<std::result::Result<(Vec3, bool), ()>>> = garment
         .par_iter()
         .with_min_len(256)
-        .map_init(Vec::new, |crossings, &p| {
-            if !test.inside(p) {
-                return None;
-            }
-            let best = views
-                .iter()
-                .filter_map(|v| v.push(p, offset))
-                .min_by(|a, b| a.length.total_cmp(&b.length));
-            Some(match best {
-                Some(push) if leaves_cleanly(&test, p, push, texel, crossings) => {
-                    Ok(p + push.dir * push.length)
+        .map_init(
+            || (Vec::new(), Lines::default()),
+            |(crossings, lines), &p| {
+                // The drape's test has no far-cell grid: `inside` is `exact`, here keeping the
+                // axis lines through p for the push's check and the self-check of its end.
+                if !test.exact_keeping(p, lines) {
+                    return None;
                 }
-                _ => Err(()),
-            })
-        })
+                let best = views
+                    .iter()
+                    .filter_map(|v| v.push(p, offset))
+                    .min_by(|a, b| a.length.total_cmp(&b.length));
+                Some(match best {
+                    Some(push) if leaves_cleanly(test, p, push, texel, crossings, Some(lines)) => {
+                        let q = p + push.dir * push.length;
+                        Ok((q, test.exact_on_lines(q, lines)))
+                    }
+                    _ => Err(()),
+                })
+            },
+        )
         .collect();
 
     let mut unresolved: Vec<usize> = Vec::new();
-    // Vertices pushed out: the only ones whose inside test may have changed.
+    // Vertices pushed out by the fallback: the only ones whose inside test may have changed
+    // and is not known yet.
     let mut pushed: Vec<usize> = Vec::new();
+    // Vertices the views pushed that are still inside (checked above).
+    let mut short = 0;
     for (i, o) in outcome.iter().enumerate() {
         match o {
             None => {}
-            Some(Ok(q)) => {
+            Some(Ok((q, inside))) => {
                 report.inside += 1;
-                pushed.push(i);
+                short += *inside as usize;
                 apply(&mut report, &mut garment[i], *q);
             }
             Some(Err(())) => {
@@ -221,7 +335,7 @@ pub fn drape_with(
                 candidates
                     .into_iter()
                     .flatten()
-                    .find(|push| leaves_cleanly(&test, p, *push, step, crossings))
+                    .find(|push| leaves_cleanly(test, p, *push, step, crossings, None))
                     .map(|push| p + push.dir * push.length)
             })
             .collect();
@@ -236,8 +350,9 @@ pub fn drape_with(
     report.unresolved = report.unresolved_by_views - report.resolved_by_fallback;
     // The self-check: inside after the call. Outside vertices did not move and unresolved
     // ones stayed inside, so only the pushed ones are tested again (each was tested along
-    // its push already: no more than the fit's own queries).
-    let short = pushed
+    // its push already: no more than the fit's own queries); those the views pushed were
+    // tested above.
+    short += pushed
         .par_iter()
         .with_min_len(256)
         .filter(|&&i| test.inside(garment[i]))
@@ -256,7 +371,8 @@ fn apply(report: &mut DrapeReport, p: &mut Vec3, q: Vec3) {
 
 /// Whether the straight path of a push leaves the body once and for all, to half a `texel`
 /// past the pushed point: it crosses the surface once (crossings that coincide, as on a face
-/// two touching pieces share, cancel in pairs) and ends outside. `p` is inside.
+/// two touching pieces share, cancel in pairs) and ends outside. `p` is inside; `lines`, when
+/// given, were kept at `p` ([`InsideTest::exact_keeping`]).
 ///
 /// Along an axis the crossings are exact: one walk of the inside test's triangle list for that
 /// axis ([`InsideTest::ray_crossings`]), where the ray agrees with the test's vote at `p`.
@@ -267,6 +383,7 @@ fn leaves_cleanly(
     push: Push,
     texel: f32,
     crossings: &mut Vec<f64>,
+    lines: Option<&Lines>,
 ) -> bool {
     let Some(axis) = (0..3).find(|&a| push.dir[a].abs() == 1.0) else {
         return sampled_path(test, p, push, texel);
@@ -274,7 +391,11 @@ fn leaves_cleanly(
     let end = p + push.dir * (push.length + 0.5 * texel);
     let reach = (end[axis] as f64 - p[axis] as f64).abs();
     let positive = push.dir[axis] > 0.0;
-    if test.ray_crossings(p, axis, positive, reach, crossings) != Some(true) {
+    let odd = match lines {
+        Some(l) => test.ray_crossings_kept(l, axis, positive, reach, crossings),
+        None => test.ray_crossings(p, axis, positive, reach, crossings),
+    };
+    if odd != Some(true) {
         return sampled_path(test, p, push, texel);
     }
     // Crossings closer than this are one place on the surface (f32 rounding of the corners
@@ -356,4 +477,58 @@ pub fn body_field(body: &Mesh, resolution: u32, band: f32) -> Result<DistanceFie
     let spec = GridSpec::fit(&body.bounds(), resolution, 0.05)?;
     let boundary = crate::voxel::voxelize_cpu(body, &spec, BoundaryVariant::Closest)?;
     crate::sdf::build_field_cpu(&boundary, band)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imprint_core::mesh::primitives::torus;
+
+    /// [`drape_cpu`] against a fresh preparation ([`drape_with`] keeps nothing).
+    fn same_as_fresh(body: &Mesh, garment: &[Vec3], params: &DrapeParams) {
+        let (mut kept, mut fresh) = (garment.to_vec(), garment.to_vec());
+        let a = drape_cpu(body, &mut kept, params).unwrap();
+        let b = drape_with(body, &mut fresh, params, rasterize_depth_with).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(kept, fresh);
+        assert!(a.moved > 0, "{a:?}");
+    }
+
+    /// The kept maps serve only the body they were made for: a second call on the same body
+    /// reuses them; a moved body, a changed triangle list or another resolution is prepared
+    /// again. Each result equals a fresh drape's. (Other tests may drape other bodies in
+    /// between: the results must not depend on it.)
+    #[test]
+    fn a_changed_body_is_prepared_again() {
+        let body = torus(0.5, 0.2, 60, 24);
+        let garment = torus(0.5, 0.17, 50, 20).positions;
+        let params = DrapeParams {
+            resolution: 96,
+            ..Default::default()
+        };
+        same_as_fresh(&body, &garment, &params);
+        same_as_fresh(&body, &garment, &params);
+        let mut moved = body.clone();
+        moved.positions[7].y += 0.05;
+        same_as_fresh(&moved, &garment, &params);
+        let mut shifted = body.clone();
+        for p in &mut shifted.positions {
+            p.x += 0.01;
+        }
+        same_as_fresh(&shifted, &garment, &params);
+        let mut flipped = shifted.clone();
+        flipped.triangles.rotate_left(5);
+        flipped.triangles[0].swap(1, 2);
+        same_as_fresh(&flipped, &garment, &params);
+        let finer = DrapeParams {
+            resolution: 128,
+            ..params.clone()
+        };
+        same_as_fresh(&flipped, &garment, &finer);
+        let sideways = DrapeParams {
+            views: vec![Vec3::X],
+            ..params
+        };
+        same_as_fresh(&flipped, &garment, &sideways);
+    }
 }

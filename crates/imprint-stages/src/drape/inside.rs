@@ -5,7 +5,9 @@
 //! mesh's projection along its axis: the triangles are binned in a 2D grid of that
 //! projection, and a triangle is crossed when its projection covers the point (a half-open
 //! rule on edges, so a point on an edge shared by two triangles is counted by exactly one) and
-//! its plane lies beyond the point along the axis.
+//! its plane lies beyond the point along the axis. The cells are about square, the size of an
+//! average triangle's projected box; a cell's list carries each triangle's projected box, which
+//! rejects most of the list (by comparisons, without branches) before the exact test.
 //!
 //! Meaningful for closed (watertight) bodies, as is "inside". Pieces that touch along shared
 //! faces (boxes stacked into a U) are fine: each shared face is crossed twice, which keeps the
@@ -19,7 +21,7 @@
 //! its cell centres (and left to the exact test when they disagree); points in near cells,
 //! beyond the grid, or of a mesh that is not closed take the exact test.
 
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{DVec2, DVec3, Vec2, Vec3, Vec4};
 use imprint_core::{Aabb, Mesh};
 
 /// The inside test of one closed mesh.
@@ -237,29 +239,75 @@ impl InsideTest {
         out: &mut Vec<f64>,
     ) -> Option<bool> {
         out.clear();
-        let g = &self.axes[axis];
-        let Some(list) = g.cell_list(p) else {
-            return Some(false);
-        };
-        let q = DVec2::new(p[g.uv[0]] as f64, p[g.uv[1]] as f64);
-        let pw = p[axis] as f64;
-        let mut odd = false;
-        for &t in list {
-            let Some(w) = crossing(&g.tris[t as usize], q) else {
-                continue;
-            };
-            let s = if positive { w - pw } else { pw - w };
-            if s == 0.0 {
-                return None;
+        let mut ray = Ray::new(p[axis] as f64, positive, reach);
+        match self.axes[axis].each_hit(p, |w| ray.add(w, out)) {
+            Some(false) => None,
+            _ => Some(ray.odd),
+        }
+    }
+
+    /// [`InsideTest::ray_crossings`] at the point `lines` were kept for, read from them.
+    pub fn ray_crossings_kept(
+        &self,
+        lines: &Lines,
+        axis: usize,
+        positive: bool,
+        reach: f64,
+        out: &mut Vec<f64>,
+    ) -> Option<bool> {
+        out.clear();
+        let mut ray = Ray::new(lines.at[axis] as f64, positive, reach);
+        lines.w[axis]
+            .iter()
+            .all(|&w| ray.add(w, out))
+            .then_some(ray.odd)
+    }
+
+    /// [`InsideTest::exact`] at `p`, keeping the crossings of the three axis lines through
+    /// `p` in `lines` (complete when `p` is inside) for [`InsideTest::exact_on_lines`] and
+    /// [`InsideTest::ray_crossings_kept`].
+    pub fn exact_keeping(&self, p: Vec3, lines: &mut Lines) -> bool {
+        lines.at = p;
+        let mut votes = 0;
+        for (g, kept) in self.axes.iter().zip(&mut lines.w) {
+            kept.clear();
+            let pw = p[g.axis] as f64;
+            let mut odd = false;
+            let all = g.each_hit(p, |w| {
+                kept.push(w);
+                odd ^= w > pw;
+                w != pw
+            });
+            if all == Some(false) {
+                return false;
             }
-            if s > 0.0 {
-                odd = !odd;
-                if s <= reach {
-                    out.push(s);
-                }
+            votes += odd as u32;
+        }
+        votes >= 2
+    }
+
+    /// [`InsideTest::exact`] at `q`, reading the ray along an axis from `lines` where `q` lies
+    /// on that axis's line through the point they were kept for (its other two coordinates
+    /// the same): a point pushed along an axis needs two walks, not three.
+    pub fn exact_on_lines(&self, q: Vec3, lines: &Lines) -> bool {
+        let mut votes = 0;
+        for g in &self.axes {
+            let on_line =
+                g.uv.iter()
+                    .all(|&a| q[a].to_bits() == lines.at[a].to_bits());
+            let odd = if on_line {
+                let qw = q[g.axis] as f64;
+                let w = &lines.w[g.axis];
+                (!w.contains(&qw)).then(|| w.iter().filter(|&&w| w > qw).count() % 2 == 1)
+            } else {
+                g.odd_crossings(q)
+            };
+            match odd {
+                None => return false,
+                Some(odd) => votes += odd as u32,
             }
         }
-        Some(odd)
+        votes >= 2
     }
 
     /// [`InsideTest::inside`] by the three rays, without the voxel grid.
@@ -284,7 +332,51 @@ impl InsideTest {
     }
 }
 
-/// The triangles projected along one axis, binned in a square-ish 2D grid.
+/// The crossings of the three axis lines through one point (axis coordinates, both ways from
+/// it, in list order), kept by [`InsideTest::exact_keeping`].
+#[derive(Default)]
+pub struct Lines {
+    at: Vec3,
+    w: [Vec<f64>; 3],
+}
+
+/// The crossings of one ray as [`InsideTest::ray_crossings`] gathers them.
+struct Ray {
+    from: f64,
+    positive: bool,
+    reach: f64,
+    odd: bool,
+}
+
+impl Ray {
+    fn new(from: f64, positive: bool, reach: f64) -> Self {
+        Ray {
+            from,
+            positive,
+            reach,
+            odd: false,
+        }
+    }
+
+    /// Takes the crossing of the line at `w`; false when it is the ray's origin.
+    #[inline]
+    fn add(&mut self, w: f64, out: &mut Vec<f64>) -> bool {
+        let s = if self.positive {
+            w - self.from
+        } else {
+            self.from - w
+        };
+        if s > 0.0 {
+            self.odd = !self.odd;
+            if s <= self.reach {
+                out.push(s);
+            }
+        }
+        s != 0.0
+    }
+}
+
+/// The triangles projected along one axis, binned in a 2D grid of about square cells.
 struct AxisGrid {
     axis: usize,
     /// The two other axes (u, v).
@@ -292,11 +384,26 @@ struct AxisGrid {
     min: DVec2,
     cell: DVec2,
     n: [usize; 2],
-    /// Triangle lists per cell, as ranges into `items`.
+    /// Triangle lists per cell, as ranges into `boxes` and `items`.
     starts: Vec<u32>,
+    /// Per list entry, the triangle's projected box as (lo.u, lo.v, −hi.u, −hi.v): the
+    /// projection r lies in it when (r.u, r.v, −r.u, −r.v) is not below it, one 4-wide
+    /// comparison. Read before the triangle itself: most of a list is rejected from this one
+    /// contiguous stream.
+    boxes: Vec<Vec4>,
+    /// Per list entry, the triangle.
     items: Vec<u32>,
     tris: Vec<Tri2>,
 }
+
+/// A cell's side in average projected triangle boxes: finer cells mean shorter lists (fewer
+/// triangles to reject per query) but more entries to build, as each triangle is listed in
+/// every cell its box meets.
+const CELL_PER_EXTENT: f64 = 1.0;
+/// Most cells per triangle kept (a few large triangles among many small ones).
+const MAX_CELLS_PER_TRIANGLE: f64 = 4.0;
+/// Most cells along one side of an axis grid.
+const MAX_SIDE: usize = 4096;
 
 /// A triangle as its ray sees it: counter-clockwise projection and the axis coordinate of
 /// its corners. Kept in f32, as the mesh gives them (half the memory the queries read; the
@@ -357,8 +464,20 @@ impl AxisGrid {
         } else {
             (proj(bounds.max) - min).max(DVec2::splat(1e-9))
         };
-        let side = ((kept.len() as f64).sqrt().ceil() as usize).clamp(1, 256);
-        let n = [side, side];
+        // About square cells the size of an average triangle's projected box: a triangle is
+        // listed in a few cells whatever the projection's aspect (a torus seen edge-on is a
+        // long thin band), and a cell's list holds a few layers' worth of triangles.
+        let extent: f64 = kept
+            .iter()
+            .map(|t| {
+                let d = t.p[0].max(t.p[1]).max(t.p[2]) - t.p[0].min(t.p[1]).min(t.p[2]);
+                d.max_element() as f64
+            })
+            .sum::<f64>()
+            / kept.len().max(1) as f64;
+        let fine = (size.x * size.y / (kept.len() as f64 * MAX_CELLS_PER_TRIANGLE).max(1.0)).sqrt();
+        let side = (CELL_PER_EXTENT * extent).max(fine);
+        let n = [0, 1].map(|a| ((size[a] / side).ceil() as usize).clamp(1, MAX_SIDE));
         let cell = size / DVec2::new(n[0] as f64, n[1] as f64);
         // `as` truncates, which is the floor for c >= 0 (and 0 below, as the clamp would be).
         let cell_of = |q: DVec2| {
@@ -369,18 +488,28 @@ impl AxisGrid {
             ]
         };
         let mut counts = vec![0u32; n[0] * n[1] + 1];
-        let ranges: Vec<([usize; 2], [usize; 2])> = kept
+        let mut boxes: Vec<(Vec2, Vec2, [usize; 2], [usize; 2])> = kept
             .iter()
             .map(|t| {
-                let lo = t.p(0).min(t.p(1)).min(t.p(2));
-                let hi = t.p(0).max(t.p(1)).max(t.p(2));
-                (cell_of(lo), cell_of(hi))
+                let lo = t.p[0].min(t.p[1]).min(t.p[2]);
+                let hi = t.p[0].max(t.p[1]).max(t.p[2]);
+                (lo, hi, cell_of(lo.as_dvec2()), cell_of(hi.as_dvec2()))
             })
             .collect();
-        for (lo, hi) in &ranges {
-            for j in lo[1]..=hi[1] {
-                for i in lo[0]..=hi[0] {
-                    counts[j * n[0] + i + 1] += 1;
+        // The triangles in the order of the cells their boxes start in: a query reads the
+        // triangles of a few neighbouring cells, then close together in memory, not spread
+        // over the mesh's order. (The answers do not depend on the order of a list.)
+        let mut order: Vec<u32> = (0..kept.len() as u32).collect();
+        order.sort_by_key(|&t| {
+            let l = boxes[t as usize].2;
+            l[1] * n[0] + l[0]
+        });
+        kept = order.iter().map(|&t| kept[t as usize]).collect();
+        boxes = order.iter().map(|&t| boxes[t as usize]).collect();
+        for (_, _, l, h) in &boxes {
+            for j in l[1]..=h[1] {
+                for c in &mut counts[j * n[0] + l[0] + 1..=j * n[0] + h[0] + 1] {
+                    *c += 1;
                 }
             }
         }
@@ -388,11 +517,13 @@ impl AxisGrid {
             counts[k] += counts[k - 1];
         }
         let mut fill = counts.clone();
-        let mut items = vec![0u32; *counts.last().unwrap() as usize];
-        for (t, (lo, hi)) in ranges.iter().enumerate() {
-            for j in lo[1]..=hi[1] {
-                for i in lo[0]..=hi[0] {
-                    let c = j * n[0] + i;
+        let total = *counts.last().unwrap() as usize;
+        let (mut entry_boxes, mut items) = (vec![Vec4::ZERO; total], vec![0u32; total]);
+        for (t, &(lo, hi, l, h)) in boxes.iter().enumerate() {
+            let b = Vec4::new(lo.x, lo.y, -hi.x, -hi.y);
+            for j in l[1]..=h[1] {
+                for c in j * n[0] + l[0]..=j * n[0] + h[0] {
+                    entry_boxes[fill[c] as usize] = b;
                     items[fill[c] as usize] = t as u32;
                     fill[c] += 1;
                 }
@@ -405,15 +536,21 @@ impl AxisGrid {
             cell,
             n,
             starts: counts,
+            boxes: entry_boxes,
             items,
             tris: kept,
         }
     }
 
-    /// The triangles whose projection may cover that of `p`: the list of the cell `p`
-    /// projects into; `None` beyond the box (no triangle there).
-    fn cell_list(&self, p: Vec3) -> Option<&[u32]> {
-        let q = DVec2::new(p[self.uv[0]] as f64, p[self.uv[1]] as f64);
+    /// Calls `visit` with the axis coordinate of each place where the line through `p` along
+    /// the axis crosses a triangle (both ways from `p`, in no particular order) until it
+    /// returns false; `None` beyond the box (no triangle there), else whether all were
+    /// visited. A triangle whose projected box does not hold `p`'s projection is not crossed
+    /// (the premise of the binning, taken down from cells to single boxes).
+    #[inline]
+    fn each_hit(&self, p: Vec3, mut visit: impl FnMut(f64) -> bool) -> Option<bool> {
+        let r = Vec2::new(p[self.uv[0]], p[self.uv[1]]);
+        let q = r.as_dvec2();
         let c = ((q - self.min) / self.cell).floor();
         // Beyond the box: no triangle. On its far side: the last cell (as the binning clamps).
         if !(c.x >= 0.0 && c.y >= 0.0 && c.x <= self.n[0] as f64 && c.y <= self.n[1] as f64) {
@@ -421,52 +558,68 @@ impl AxisGrid {
         }
         let cell =
             (c.y as usize).min(self.n[1] - 1) * self.n[0] + (c.x as usize).min(self.n[0] - 1);
-        Some(&self.items[self.starts[cell] as usize..self.starts[cell + 1] as usize])
+        let range = self.starts[cell] as usize..self.starts[cell + 1] as usize;
+        let key = Vec4::new(r.x, r.y, -r.x, -r.y);
+        // 32 boxes at a time into a bit mask, without a branch per box (whether a box holds
+        // the point is a coin toss the branch predictor loses), then the triangles of the set
+        // bits.
+        for (boxes, items) in self.boxes[range.clone()]
+            .chunks(32)
+            .zip(self.items[range].chunks(32))
+        {
+            let mut mask = boxes.iter().enumerate().fold(0u32, |m, (k, b)| {
+                m | ((b.cmple(key).bitmask() == 0b1111) as u32) << k
+            });
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if let Some(w) = crossing(&self.tris[items[k] as usize], q)
+                    && !visit(w)
+                {
+                    return Some(false);
+                }
+            }
+        }
+        Some(true)
     }
 
     /// Whether the ray from `p` along the axis crosses the surface an odd number of times;
     /// `None` when `p` lies on a triangle the ray meets.
     fn odd_crossings(&self, p: Vec3) -> Option<bool> {
-        let Some(list) = self.cell_list(p) else {
-            return Some(false);
-        };
-        let q = DVec2::new(p[self.uv[0]] as f64, p[self.uv[1]] as f64);
         let pw = p[self.axis] as f64;
         let mut odd = false;
-        for &t in list {
-            let t = &self.tris[t as usize];
-            match crossing(t, q) {
-                Some(w) if w == pw => return None,
-                Some(w) if w > pw => odd = !odd,
-                _ => {}
-            }
+        match self.each_hit(p, |w| {
+            odd ^= w > pw;
+            w != pw
+        }) {
+            Some(false) => None,
+            _ => Some(odd),
         }
-        Some(odd)
     }
 }
 
 /// Where the ray through `q` crosses the triangle (its axis coordinate), if it does. An edge
 /// owns the points on it when it runs "up" (dv > 0, or dv = 0 and du < 0): of two triangles
 /// sharing an edge (traversed in opposite directions), exactly one owns it.
+#[inline]
 fn crossing(t: &Tri2, q: DVec2) -> Option<f64> {
-    let mut b = [0f64; 3];
-    for (k, bk) in b.iter_mut().enumerate() {
+    // All three edges, then one branch: which edge rejects a point is unpredictable, and a
+    // mispredicted branch costs more than the arithmetic it skips.
+    let edge = |k: usize| {
         let a = t.p((k + 1) % 3);
         let c = t.p((k + 2) % 3);
         let d = c - a;
         let e = d.perp_dot(q - a);
         let owns = d.y > 0.0 || (d.y == 0.0 && d.x < 0.0);
-        if e < 0.0 || (e == 0.0 && !owns) {
-            return None;
-        }
-        *bk = e;
-    }
-    let sum = b[0] + b[1] + b[2];
-    if sum <= 0.0 {
+        (e, e > 0.0 || (e == 0.0 && owns))
+    };
+    let ((e0, k0), (e1, k1), (e2, k2)) = (edge(0), edge(1), edge(2));
+    let sum = e0 + e1 + e2;
+    if !(k0 & k1 & k2 & (sum > 0.0)) {
         return None;
     }
     let w = t.w.map(f64::from);
-    Some((b[0] * w[0] + b[1] * w[1] + b[2] * w[2]) / sum)
+    Some((e0 * w[0] + e1 * w[1] + e2 * w[2]) / sum)
 }
 
 #[cfg(test)]
@@ -552,6 +705,54 @@ mod tests {
         // The grid does answer a good share (not only the rays).
         for share in [tor, cube, ub] {
             assert!(share > 0.05, "{tor} {cube} {ub}");
+        }
+    }
+
+    /// The bins and the boxes drop only triangles the ray cannot cross: each axis's answer
+    /// equals that of a walk over all its triangles, at random points, on and near the
+    /// triangles (several scales) and at the vertices.
+    #[test]
+    fn bins_answer_as_all_triangles() {
+        let mut u = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
+        u.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
+        for (mesh, seed) in [(torus(0.5, 0.2, 60, 24), 5), (u, 6)] {
+            let t = InsideTest::rays_only(&mesh);
+            let b = mesh.bounds();
+            let (lo, size) = (b.min - 0.1 * (b.max - b.min), 1.2 * (b.max - b.min));
+            let mut rng = Rng(seed);
+            let mut points: Vec<Vec3> = mesh.positions.clone();
+            for _ in 0..4_000 {
+                points.push(lo + rng.vec() * size);
+                let tri = mesh.triangle((rng.next() * mesh.triangles.len() as f32) as usize);
+                let (u, v) = (rng.next(), rng.next());
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let on = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+                points.push(on);
+                let scale = [1e-2, 1e-4, 1e-6, 1e-7][(rng.next() * 4.0) as usize];
+                points.push(on + (rng.vec() - 0.5) * scale);
+            }
+            for g in &t.axes {
+                for &p in &points {
+                    let q = DVec2::new(p[g.uv[0]] as f64, p[g.uv[1]] as f64);
+                    let pw = p[g.axis] as f64;
+                    let mut all = Some(false);
+                    for tri in &g.tris {
+                        match crossing(tri, q) {
+                            Some(w) if w == pw => {
+                                all = None;
+                                break;
+                            }
+                            Some(w) if w > pw => all = all.map(|o| !o),
+                            _ => {}
+                        }
+                    }
+                    assert_eq!(g.odd_crossings(p), all, "axis {} at {p:?}", g.axis);
+                }
+            }
         }
     }
 

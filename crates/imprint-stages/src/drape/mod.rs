@@ -1,7 +1,8 @@
-//! Drape: pushing a garment out of a body with depth maps (T §(2)④, METHODS.md §4).
+//! Drape: pushing a garment out of a body with depth maps (T §(2)④, docs/methods.md §4).
 //!
-//! **Inputs.** A body (any triangle mesh, possibly deforming: each call renders it afresh)
-//! and a garment: any set of points (a mesh's positions, a cloth's particles), moved in place.
+//! **Inputs.** A body (any triangle mesh, possibly deforming: each call renders it afresh,
+//! unless it is the body [`drape_cpu`] prepared last, positions and triangles bit for bit) and a
+//! garment: any set of points (a mesh's positions, a cloth's particles), moved in place.
 //! One call is a one-shot fit ([`drape_cpu`]); the same maps, dilated by the cloth's ε and
 //! read every substep, are a collider for the cloth ([`collider`]).
 //!
@@ -64,12 +65,14 @@
 //! along a view axis, not along the normal, so near a silhouette of the chosen view a
 //! vertex lands well away from where a radial (closest-point) projection would put it.
 //!
-//! **Cost.** Per call: 2 renders per distinct view line, with the inside test's three axis
-//! bins (O(triangles)) built alongside; per garment vertex an inside test (three short
-//! triangle lists); per inside vertex one lookup per view and the clean-exit check: for an
-//! axis push one more walk of a triangle list and at most two at the end, else O(push length
-//! / texel) inside tests. The field is built only when the fallback is on and some vertex
-//! needs it.
+//! **Cost.** Per body: 2 renders per distinct view line, with the inside test's three axis
+//! bins (O(triangles)) built alongside; [`drape_cpu`] keeps them for the next call on the same
+//! body (a static body draped every frame), [`drape_with`] does not. Per garment vertex an
+//! inside test (three short triangle lists, whose crossings are kept); per inside vertex one
+//! lookup per view and the clean-exit check: for an axis push the crossings along it are
+//! those kept, plus at most two lists at the end and two at the pushed point (the self-check),
+//! else O(push length / texel) inside tests. The field is built only when the fallback is on
+//! and some vertex needs it.
 //!
 //! **Determinism.** Every vertex is decided on its own from the maps and the mesh; counts and
 //! the maximum are gathered in vertex order: the result is the same on any thread count.

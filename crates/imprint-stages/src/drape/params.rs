@@ -3,11 +3,12 @@
 
 use glam::Vec3;
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Everything the drape stage needs besides the body and the garment. Every field may be left
 /// out; the defaults are [`DrapeParams::default`]'s.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct DrapeParams {
     /// The directions the views look along (need not be unit length). Each view renders two
@@ -15,6 +16,7 @@ pub struct DrapeParams {
     /// Default T's three: top (0, -1, 0), front (0, 0, -1) and back (0, 0, 1). Note that front
     /// and back look along the same line, so they give the same pair of maps: T's set has two
     /// distinct lines; add e.g. (1, 0, 0) for a third.
+    #[schemars(with = "Vec<[f32; 3]>")]
     pub views: Vec<Vec3>,
     /// Side of the square depth maps, pixels. Default 512.
     pub resolution: u32,
@@ -25,7 +27,7 @@ pub struct DrapeParams {
 }
 
 /// The second chance for the vertices no view resolves (beyond T).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Fallback {
     /// Leave them where they are; they are counted in the report.

@@ -1,4 +1,4 @@
-//! Ground deformation by contact (METHODS §7, Onoue & Nishita, "O"): objects pressing into
+//! Ground deformation by contact (docs/methods.md §7, Onoue & Nishita, "O"): objects pressing into
 //! a soft heightfield leave prints, with rims that slump (sand) or clean walls (snow).
 //! The field persists across frames, so a body moving over it leaves a track.
 //!

@@ -7,10 +7,11 @@
 
 use glam::Vec2;
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Everything the ground stage needs besides the objects of the frame.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroundParams {
     /// Extent of the field along x and z, m. Cells are square, so
@@ -25,6 +26,7 @@ pub struct GroundParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "[f32; 2]")]
     pub origin: Option<Vec2>,
     /// The ground before the first frame.
     #[serde(default)]
@@ -56,7 +58,7 @@ pub struct GroundParams {
 }
 
 /// The ground before the first frame.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Initial {
     /// Every cell at this height above the base plane, m (≥ 0).
@@ -82,7 +84,8 @@ impl Default for Initial {
 }
 
 /// How the ground gives way (O §2.3, §2.5).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(rename = "GroundMaterial")]
 #[serde(deny_unknown_fields)]
 pub enum Material {
     /// O §3's parameter sets.
@@ -107,7 +110,7 @@ impl Default for Material {
 }
 
 /// O §3's two grounds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum Preset {
     /// θ = 90°, En = 0, α = 0: clean-walled prints, no rim.
     Snow,
@@ -116,7 +119,7 @@ pub enum Preset {
 }
 
 /// A material's numbers, whether from a preset or custom.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct MaterialValues {
     pub repose_degrees: f32,
     pub slump_iterations: u32,
@@ -151,7 +154,7 @@ impl Material {
 
 /// How and where the ground slumps after the press. One field chooses it; the material's θ
 /// sets the slope for all three, and En (`slump_iterations`) counts only for `Labelled`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum Relaxation {
     /// The default: after every frame, no two 4-neighbouring cells that no object holds
     /// (neither in contact this frame) differ by more than tan θ · cell plus one height unit,

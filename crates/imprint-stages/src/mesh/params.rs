@@ -5,6 +5,7 @@
 
 use glam::Vec3;
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Largest primitive we build: beyond this a typo in the tessellation is more likely than
@@ -12,7 +13,7 @@ use serde::{Deserialize, Serialize};
 pub const MAX_PRIMITIVE_TRIANGLES: u64 = 1 << 24;
 
 /// A mesh source: a file or a primitive, optionally fitted into a box, then animated.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeshParams {
     /// Mesh file, relative to the pipeline file's folder: OBJ, PLY (ASCII or binary), STL
@@ -22,6 +23,7 @@ pub struct MeshParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "String")]
     pub path: Option<String>,
     /// A procedural shape centred on the origin (instead of `path`).
     #[serde(
@@ -29,6 +31,7 @@ pub struct MeshParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "Primitive")]
     pub primitive: Option<Primitive>,
     /// Uniform scale and translation of the rest mesh; `None` keeps its own coordinates.
     #[serde(
@@ -36,6 +39,7 @@ pub struct MeshParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "Fit")]
     pub fit: Option<Fit>,
     /// A glTF file's animation clip, by name (the error lists the file's): the mesh is then
     /// the file's skinned mesh posed by the clip at each frame's time (linear blend with the
@@ -47,11 +51,15 @@ pub struct MeshParams {
         with = "crate::bare_option",
         skip_serializing_if = "Option::is_none"
     )]
+    #[schemars(with = "String")]
     pub clip: Option<String>,
+    /// Clip seconds per pipeline second (default 1).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub speed: f32,
+    /// Play the clip again from its start when it ends (default true); else hold its end.
     #[serde(default = "yes", rename = "loop", skip_serializing_if = "is_true")]
     pub looping: bool,
+    /// Clip time at the pipeline's time 0, seconds (default 0).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub clip_offset: f32,
     /// Fill the mesh's holes (fans around each boundary loop's centroid), so that an open
@@ -87,45 +95,60 @@ fn is_false(b: &bool) -> bool {
 }
 
 /// Puts the rest mesh's bounding box, longest side `size`, centred on `center`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Fit {
+    /// Longest side of the box after fitting, m (the mesh is scaled uniformly).
     pub size: f32,
+    /// Where the box's centre is put, m.
     #[serde(default)]
+    #[schemars(with = "[f32; 3]")]
     pub center: Vec3,
 }
 
 /// Procedural shapes (imprint_core::mesh::primitives), centred on the origin.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Primitive {
     /// Latitude/longitude sphere: `2 * segments * (rings - 1)` triangles.
     Sphere {
+        /// Radius, m.
         radius: f32,
+        /// Divisions around the y axis (longitude; at least 3).
         #[serde(default = "d64")]
         segments: u32,
+        /// Latitude bands from pole to pole (the poles are on the y axis; at least 2).
         #[serde(default = "d32")]
         rings: u32,
     },
     /// Axis-aligned box of full extents `size`, each face split into `subdivisions`² quads
     /// (more than one so that bends and twists have vertices to move).
     Box {
+        /// Full extents along x, y and z, m.
+        #[schemars(with = "[f32; 3]")]
         size: Vec3,
+        /// Quads along each edge of a face (at least 1).
         #[serde(default = "d16")]
         subdivisions: u32,
     },
     /// Square in x-z at y = 0 facing +y, side `size`, `subdivisions`² quads.
     Plane {
+        /// Side of the square, m.
         size: f32,
+        /// Quads along each side (at least 1).
         #[serde(default = "d64")]
         subdivisions: u32,
     },
     /// Torus around the y axis: ring radius `major`, tube radius `minor`.
     Torus {
+        /// Distance from the y axis to the tube's centre line, m.
         major: f32,
+        /// Radius of the tube, m.
         minor: f32,
+        /// Divisions around the y axis, along the ring (at least 3).
         #[serde(default = "d64")]
         segments: u32,
+        /// Divisions around the tube (at least 3).
         #[serde(default = "d32")]
         sides: u32,
     },
@@ -133,10 +156,14 @@ pub enum Primitive {
     /// head at the origin), `segments` around, `rings` quads along (an even number puts a
     /// ring at the middle joint): `2 * segments * (rings + 1)` triangles.
     Cylinder {
+        /// Radius, m.
         radius: f32,
+        /// Length along +x, m.
         length: f32,
+        /// Divisions around the x axis (at least 3).
         #[serde(default = "d64")]
         segments: u32,
+        /// Quads along the length (at least 1).
         #[serde(default = "d32")]
         rings: u32,
     },
@@ -155,7 +182,7 @@ fn one() -> f32 {
     1.0
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 pub enum Axis {
     X,
     Y,
@@ -213,11 +240,28 @@ impl<'de> Deserialize<'de> for RotationAxis {
     }
 }
 
+/// The schema of what [`RotationAxis`]'s hand-written `Deserialize` accepts: a named axis
+/// or a direction `[x, y, z]` (kept by hand beside it, as the derive cannot see that impl).
+impl JsonSchema for RotationAxis {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "RotationAxis".into()
+    }
+
+    fn json_schema(g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "A rotation axis: X, Y, Z or any non-zero direction [x, y, z].",
+            "anyOf": [g.subschema_for::<Axis>(), g.subschema_for::<[f32; 3]>()],
+        })
+    }
+}
+
 /// Right-handed rotation by `degrees` about `axis`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Rotation {
+    /// The axis turned about: `X`, `Y`, `Z` or a direction `(x, y, z)` (normalised).
     pub axis: RotationAxis,
+    /// Angle, degrees, right-handed about `axis`.
     pub degrees: f32,
 }
 
@@ -231,13 +275,16 @@ impl Default for Rotation {
 }
 
 /// One keyframe of a rigid motion. Missing parts are the identity.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RigidKey {
     /// Seconds; keys must be in strictly increasing time.
     pub time: f32,
+    /// Displacement of the box centre, m.
     #[serde(default)]
+    #[schemars(with = "[f32; 3]")]
     pub translate: Vec3,
+    /// Rotation about the box centre.
     #[serde(default)]
     pub rotate: Rotation,
     /// Uniform scale about the centre.
@@ -249,26 +296,38 @@ pub struct RigidKey {
 /// bounding box, not the result of earlier motions, so each motion's parameters keep one
 /// meaning whatever precedes it (put `Rigid` last to move a deformed body as a whole).
 /// Periodic factors are `sin(2π t / period)`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Motion {
     /// Keyframes: p' = c + translate + R (scale (p - c)), c the box centre. Translation and
     /// scale interpolate linearly, rotation by slerp (shortest arc: keep successive keys
     /// under 180° apart); held constant before the first key and after the last.
-    Rigid { keys: Vec<RigidKey> },
+    Rigid {
+        /// The keyframes, in strictly increasing `time`.
+        keys: Vec<RigidKey>,
+    },
     /// Radial scale about the centre: p' = c + (p - c)(1 + amplitude sin(2πt/period)).
-    Breathe { amplitude: f32, period: f32 },
+    Breathe {
+        /// Relative change of scale at the peak (0.1: ±10 %).
+        amplitude: f32,
+        /// Duration of one cycle, seconds.
+        period: f32,
+    },
     /// Right-handed rotation about the axis through the centre by an angle growing linearly
     /// along the axis, 0 at the box's low end and `degrees` at its high end; scaled by
     /// sin(2πt/period) when a period is given, constant otherwise.
     Twist {
+        /// The axis twisted about (through the box centre) and along which the angle grows.
         axis: Axis,
+        /// Angle of the high end relative to the low end, degrees (times the cycle's sine).
         degrees: f32,
+        /// Duration of one cycle, seconds; left out, the twist is constant.
         #[serde(
             default,
             with = "crate::bare_option",
             skip_serializing_if = "Option::is_none"
         )]
+        #[schemars(with = "f32")]
         period: Option<f32>,
     },
     /// Barr's (1984) circular-arc bend of the whole length along `axis` toward `toward`
@@ -276,29 +335,40 @@ pub enum Motion {
     /// centre line keeps its length, the high end turns by `degrees` (times sin(2πt/period)
     /// when a period is given).
     Bend {
+        /// The axis along which the length is bent (the low end stays fixed).
         axis: Axis,
+        /// Angle the high end turns by, degrees (times the cycle's sine).
         degrees: f32,
+        /// The axis the bend curves toward; default the first of X, Y, Z that is not `axis`.
         #[serde(
             default,
             with = "crate::bare_option",
             skip_serializing_if = "Option::is_none"
         )]
+        #[schemars(with = "Axis")]
         toward: Option<Axis>,
+        /// Duration of one cycle, seconds; left out, the bend is constant.
         #[serde(
             default,
             with = "crate::bare_option",
             skip_serializing_if = "Option::is_none"
         )]
+        #[schemars(with = "f32")]
         period: Option<f32>,
     },
     /// Travelling wave: p[displace] += amplitude sin(2π (p[direction] - speed t) / wavelength),
     /// with p[direction] the world coordinate.
     Wave {
+        /// Largest displacement, m.
         amplitude: f32,
+        /// Distance between crests along `direction`, m.
         wavelength: f32,
+        /// Speed the crests travel along `direction`, m/s.
         speed: f32,
+        /// The world axis the wave travels along.
         #[serde(default = "axis_x")]
         direction: Axis,
+        /// The coordinate the wave moves.
         #[serde(default = "axis_y")]
         displace: Axis,
     },

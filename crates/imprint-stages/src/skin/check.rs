@@ -1,8 +1,8 @@
 //! The particle skin's self-check: no particle beyond its reach.
 //!
-//! **Reach** (METHODS §6, force (c)): each particle is pulled toward its target, the point its
-//! bone's skinning transform gives its rest position; springs to its neighbours and the
-//! bone's motion pull it off by a lag (about `bone_damping / bone_stiffness` seconds of the
+//! **Reach** (docs/methods.md §6, force (c)): each particle is pulled toward its target, the
+//! point its bone's skinning transform gives its rest position; springs to its neighbours
+//! and the bone's motion pull it off by a lag (about `bone_damping / bone_stiffness` seconds of the
 //! bone's motion) and a joint's shear, never by a sizeable part of the body. The model allows
 //! [`ParticleParams::max_deviation`](super::particles::ParticleParams::max_deviation) × the
 //! rest mesh's box diagonal; farther, the explicit integration has left its stable range

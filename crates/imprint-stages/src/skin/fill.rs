@@ -1,4 +1,4 @@
-//! The adaptive close-packed particle fill (T §(3)①, METHODS.md §6).
+//! The adaptive close-packed particle fill (T §(3)①, docs/methods.md §6).
 //!
 //! **T's method.** Pack the mesh's bounding box with close-packed particles, keep those inside
 //! (parity of the surface crossings along x, counted on the y-z projection), remove the ones
@@ -46,10 +46,11 @@ use glam::Vec3;
 use imprint_core::bvh::Bvh;
 use imprint_core::{Error, Mesh, Result};
 use rayon::prelude::*;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// How the mesh is filled. Every field may be left out.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct FillParams {
     /// Radius of the *finest* (surface) particles, m. Default 0.01 (a tenth of a limb of

@@ -1,4 +1,4 @@
-//! Skin: deforming a mesh by a rig (METHODS.md §6, T §(3)): particle-based skinning with
+//! Skin: deforming a mesh by a rig (docs/methods.md §6, T §(3)): particle-based skinning with
 //! adaptive radii, beside linear blend (LBS) and dual quaternion (DQS) skinning.
 //!
 //! - [`rig`]: bones (head, tail, parent), the rest pose, keyframed and procedural animation,

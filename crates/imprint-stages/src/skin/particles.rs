@@ -1,4 +1,4 @@
-//! Particle-based skinning (T §(3), METHODS.md §6): the mesh's inside is filled with
+//! Particle-based skinning (T §(3), docs/methods.md §6): the mesh's inside is filled with
 //! adaptive close-packed particles ([`super::fill`]); each particle is pulled by its
 //! neighbours and by its bone; each mesh vertex follows its 4 nearest particles.
 //!
@@ -97,13 +97,14 @@ use super::fill::{Fill, FillParams, FillReport, fill};
 use glam::{Affine3A, Mat3A, Quat, Vec3, Vec3A};
 use imprint_core::{Error, Mesh, Result};
 use rayon::prelude::*;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Particles per parallel task: fixed, so the work split never depends on the thread count.
 const CHUNK: usize = 256;
 
 /// How a vertex's rest offset from each of its particles is turned.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum VertexRotation {
     /// By the particle's bone's rotation (T).
@@ -116,7 +117,7 @@ pub enum VertexRotation {
 }
 
 /// The inter-particle spring (a).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Spring {
     /// Toward the rest distance along the pair (T).
@@ -131,9 +132,10 @@ pub enum Spring {
 
 /// Everything the particle skinning needs besides the mesh and the bones. Every field may be
 /// left out; the defaults suit a limb of radius about 0.1 m at 24 frames per second.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct ParticleParams {
+    /// How the rest mesh is filled with particles: finest radius (m) and number of levels.
     pub fill: FillParams,
     /// (a) Spring between neighbours: the squared angular frequency of one pair, 1/s².
     /// Default 40000 (well above `bone_stiffness`, so a twist spreads over several layers).

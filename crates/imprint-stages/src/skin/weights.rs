@@ -14,6 +14,7 @@
 
 use glam::{DVec3, Vec3};
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// The most bones a vertex follows.
@@ -64,11 +65,12 @@ impl Weights {
 }
 
 /// How [`automatic`] weighs bones.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum WeightMethod {
     /// w ∝ 1 / distance-to-segment^power.
     Distance {
+        /// Exponent of the inverse distance (> 0); higher gives sharper joints.
         #[serde(default = "four")]
         power: f32,
     },

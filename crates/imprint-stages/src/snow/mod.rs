@@ -1,4 +1,4 @@
-//! Snow (T §(1), METHODS §5): snow falling on a scene, found like a shadow, piled up over
+//! Snow (T §(1), docs/methods.md §5): snow falling on a scene, found like a shadow, piled up over
 //! time, slid down slopes steeper than its angle of repose, and shown by displacing the
 //! surfaces it lies on.
 //!

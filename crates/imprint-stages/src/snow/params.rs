@@ -3,15 +3,17 @@
 
 use glam::Vec3;
 use imprint_core::{Error, Result};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Everything the snow stage needs besides the scene (the meshes and the ground of the frame).
 /// Every field may be left out; the defaults are [`SnowParams::default`]'s.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct SnowParams {
     /// The way snow moves (need not be unit length); default straight down, (0, -1, 0). The
     /// cos φ factor of the deposit is taken against this direction.
+    #[schemars(with = "[f32; 3]")]
     pub direction: Vec3,
     /// K, the number of fall directions (depth maps) per step: the arrival probability of a
     /// point is the fraction of them that reach it, so it comes in steps of 1/K. Default 16.

@@ -1,6 +1,6 @@
 //! Stabilisation of the snow on a ground height field: snow on a slope steeper than its angle
-//! of repose slides to lower cells (T's particle-deposition stabilisation, METHODS §5), until
-//! every slope of the snow surface is at most the repose angle.
+//! of repose slides to lower cells (T's particle-deposition stabilisation, docs/methods.md
+//! §5), until every slope of the snow surface is at most the repose angle.
 //!
 //! **Units.** Snow is counted in whole quanta of [`QUANTUM`] metres of column height (u32 per
 //! cell). A pass moves whole quanta from one cell to another and nothing else touches them,

@@ -2,11 +2,13 @@
 //!
 //! Each (triangle, candidate cell) pair yields the key (squared distance from the cell centre
 //! to the triangle, triangle index); an atomic `fetch_min` per cell keeps the smallest key,
-//! which does not depend on the order the pairs arrive in. An occupancy bitset then lists the
+//! which does not depend on the order the pairs arrive in. The closest points are computed
+//! eight pairs at a time ([`super::batch`], the scalar function's bits). An occupancy bitset then lists the
 //! surface cells in increasing index without scanning the whole grid, and the scratch arrays
 //! are reset only where they were touched, so a `Voxelizer` kept across frames costs time in
 //! proportion to the surface, not the grid.
 
+use super::batch::Batch;
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
 use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
@@ -73,8 +75,36 @@ impl Voxelizer {
             .par_chunks(TRIANGLES_PER_TASK)
             .enumerate()
             .for_each(|(chunk, tris)| {
+                // (cell, triangle) pairs past the plane test, their closest points a batch at
+                // a time; the proposals do not depend on the order.
+                let mut batch = Batch::<(u32, u32)>::default();
+                let propose = |(cell, ti): (u32, u32), d2: f32| {
+                    // Outside the circumscribed sphere: no contact. Inside the inscribed
+                    // one: contact. In between: the exact test.
+                    if d2 > 3.0 * CELL_HALF * CELL_HALF {
+                        return;
+                    }
+                    let cell = cell as usize;
+                    if d2 > 0.25 {
+                        let centre = spec.coords(cell).as_vec3();
+                        let [a, b, c] = mesh.triangles[ti as usize].map(|i| verts[i as usize]);
+                        if !triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c) {
+                            return;
+                        }
+                    }
+                    // Plain loads first: x86 has no atomic min (it is a CAS loop) and most
+                    // proposals lose or find the bit set.
+                    let key = ((d2.to_bits() as u64) << 32) | ti as u64;
+                    if key < best[cell].load(Relaxed) {
+                        best[cell].fetch_min(key, Relaxed);
+                    }
+                    let bit = 1u64 << (cell % 64);
+                    if occupied[cell / 64].load(Relaxed) & bit == 0 {
+                        occupied[cell / 64].fetch_or(bit, Relaxed);
+                    }
+                };
                 for (k, t) in tris.iter().enumerate() {
-                    let ti = (chunk * TRIANGLES_PER_TASK + k) as u64;
+                    let ti = (chunk * TRIANGLES_PER_TASK + k) as u32;
                     let [a, b, c] = t.map(|i| verts[i as usize]);
                     let (mn, mx) = (a.min(b).min(c) - CELL_HALF, a.max(b).max(c) + CELL_HALF);
                     let lo = IVec3::new(ceil_i(mn.x), ceil_i(mn.y), ceil_i(mn.z)).max(IVec3::ZERO);
@@ -90,39 +120,15 @@ impl Voxelizer {
                                 if n.dot(centre - a).abs() > reach {
                                     continue;
                                 }
-                                let q = closest_point_on_triangle(centre, a, b, c);
-                                let d2 = (q - centre).length_squared();
-                                // Outside the circumscribed sphere: no contact. Inside the
-                                // inscribed one: contact. In between: the exact test.
-                                if d2 > 3.0 * CELL_HALF * CELL_HALF {
-                                    continue;
-                                }
-                                if d2 > 0.25
-                                    && !triangle_box_overlap(
-                                        centre,
-                                        Vec3::splat(CELL_HALF),
-                                        a,
-                                        b,
-                                        c,
-                                    )
-                                {
-                                    continue;
-                                }
                                 let cell = x as usize + nx * y as usize + nxy * z as usize;
-                                // Plain loads first: x86 has no atomic min (it is a CAS
-                                // loop) and most proposals lose or find the bit set.
-                                let key = ((d2.to_bits() as u64) << 32) | ti;
-                                if key < best[cell].load(Relaxed) {
-                                    best[cell].fetch_min(key, Relaxed);
-                                }
-                                let bit = 1u64 << (cell % 64);
-                                if occupied[cell / 64].load(Relaxed) & bit == 0 {
-                                    occupied[cell / 64].fetch_or(bit, Relaxed);
+                                if batch.push(centre, [a, b, c], (cell as u32, ti)) {
+                                    batch.run(|t, _, d2| propose(t, d2));
                                 }
                             }
                         }
                     }
                 }
+                batch.run(|t, _, d2| propose(t, d2));
             });
 
         // Pass 2: surface cells in increasing index; reset what was touched.

@@ -19,12 +19,13 @@ use imprint_gpu::GpuContext;
 use imprint_stages::mesh::{MeshParams, MeshSource};
 use imprint_stages::voxel::cpu::Voxelizer;
 use imprint_stages::voxel::gpu::GpuBoundary;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::sync::Arc;
 use std::time::Instant;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FieldNode {
     /// The Voxelize node whose boundary the field is built from.
@@ -32,6 +33,7 @@ pub struct FieldNode {
     /// Half-width of the band, in cells (H's `a`).
     #[serde(default = "default_band")]
     pub band: f32,
+    /// Where the field is built: `Auto`, `Cpu` or `Gpu`; null: the pipeline's `backend`.
     #[serde(default)]
     pub backend: Option<Backend>,
     /// On which frames the error against the exact distance is measured (costly: one exact
@@ -42,6 +44,7 @@ pub struct FieldNode {
     /// frame); consumers reuse the last result in between.
     #[serde(default = "defaults::one")]
     pub every: u32,
+    /// Shifts the `every` cycle: frames where (frame - offset) mod every = 0 are built.
     #[serde(default)]
     pub offset: u32,
     /// Spread each build over this many frames (z-slabs, the same field as one build);
@@ -62,7 +65,7 @@ fn default_band() -> f32 {
     3.0
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, JsonSchema)]
 pub enum Measure {
     Never,
     /// The first frame run.
