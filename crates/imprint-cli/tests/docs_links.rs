@@ -55,19 +55,19 @@ fn links(text: &str) -> Vec<Link> {
         }
         let visible = without_code_spans(line);
         // Reference definition: `[label]: target` at the start of a line.
-        if let Some(rest) = trimmed.strip_prefix('[') {
-            if let Some(close) = rest.find("]:") {
-                if !rest[..close].is_empty() && !rest[..close].contains(']') {
-                    let target = rest[close + 2..].trim();
-                    if let Some(t) = first_token(target) {
-                        out.push(Link {
-                            line: line_no,
-                            target: t,
-                        });
-                    }
-                    continue;
-                }
+        if let Some(rest) = trimmed.strip_prefix('[')
+            && let Some(close) = rest.find("]:")
+            && !rest[..close].is_empty()
+            && !rest[..close].contains(']')
+        {
+            let target = rest[close + 2..].trim();
+            if let Some(t) = first_token(target) {
+                out.push(Link {
+                    line: line_no,
+                    target: t,
+                });
             }
+            continue;
         }
         // Inline links and images: `](` followed by the destination up to its closing `)`.
         let chars: Vec<char> = visible.chars().collect();
