@@ -5,14 +5,16 @@
 //! inside. Views at 512²: T's three (top, front, back), the six axis directions, and fourteen
 //! (the six and the eight cube diagonals). Reported: ms per drape (median), the share of
 //! inside vertices no view resolves, and with the distance-field fallback what is left. Each
-//! timed call prepares the body afresh (`drape_with` the CPU rasteriser: `drape_cpu` keeps the
-//! last body's maps); a last row times `drape_cpu` again on the body it just draped.
+//! timed call prepares the body afresh (`drape_with` the CPU rasteriser); a last row times
+//! `drape_cached` again on the body it just draped, as a Drape node over a static body does.
 
 use crate::median;
 use glam::Vec3;
 use imprint_core::mesh::primitives::torus;
 use imprint_core::raster::rasterize_depth_with;
-use imprint_stages::drape::{DrapeParams, Fallback, drape_cpu, drape_with};
+use imprint_stages::drape::{
+    BodyCache, DrapeParams, Fallback, drape_cached, drape_cpu, drape_with,
+};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -30,7 +32,7 @@ pub fn section(_root: &Path, repeat: usize) -> String {
          and back), offset 2 mm. **ms** = one drape call, median of {runs}; **unresolved** = \
          inside vertices no view pushes out cleanly (left in place, or handed to the fallback); \
          **after fallback** = left after the body's 64³ distance field pushes those out. Each call \
-         renders the maps and builds the inside test afresh, except in the last row: `drape_cpu` \
+         renders the maps and builds the inside test afresh, except in the last row: `drape_cached` \
          again on the body it just draped (its maps and inside test kept). Goal (issue): ≤ 20 ms \
          for 3 views.\n",
         body.triangles.len(),
@@ -58,9 +60,10 @@ pub fn section(_root: &Path, repeat: usize) -> String {
                     let mut g = garment.positions.clone();
                     let (r, ms) = if kept {
                         // The first call prepares the body, the timed second one reuses it.
-                        let _ = drape_cpu(&body, &mut garment.positions.clone(), p);
+                        let mut cache = BodyCache::default();
+                        let _ = drape_cached(&mut cache, &body, &mut garment.positions.clone(), p);
                         let t = Instant::now();
-                        (drape_cpu(&body, &mut g, p), t.elapsed())
+                        (drape_cached(&mut cache, &body, &mut g, p), t.elapsed())
                     } else {
                         let t = Instant::now();
                         let r = drape_with(&body, &mut g, p, rasterize_depth_with);

@@ -75,6 +75,7 @@ impl Node for DrapeNode {
             garment: ctx.mesh_in(&self.garment),
             params: self.params.clone(),
             gpu,
+            cache: Default::default(),
         }))
     }
     fn as_any(&self) -> &dyn Any {
@@ -88,6 +89,8 @@ struct DrapeStage {
     params: DrapeParams,
     /// The GPU rasteriser for the views, when the node runs on the GPU.
     gpu: Option<(&'static GpuContext, Box<GpuRasterizer>)>,
+    /// The last body's maps and inside test, for a body that did not change (CPU path).
+    cache: imprint_stages::drape::BodyCache,
 }
 
 impl Stage for DrapeStage {
@@ -104,7 +107,12 @@ impl Stage for DrapeStage {
                 &self.params,
                 |m, cam, w, h, o| r.depth_map(gpu, m, cam, w, h, o),
             ),
-            None => imprint_stages::drape::drape_cpu(body, &mut fitted.positions, &self.params),
+            None => imprint_stages::drape::drape_cached(
+                &mut self.cache,
+                body,
+                &mut fitted.positions,
+                &self.params,
+            ),
         }
         .map_err(|e| ctx.at_node(e))?;
         fitted.compute_normals();

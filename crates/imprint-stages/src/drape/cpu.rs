@@ -10,7 +10,6 @@ use glam::Vec3;
 use imprint_core::raster::{DepthMap, RasterOptions, rasterize_depth_with};
 use imprint_core::{BoundaryVariant, DistanceField, GridSpec, Mesh, Result, Sampling};
 use rayon::prelude::*;
-use std::sync::{Arc, Mutex};
 
 /// What one call did.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
@@ -109,15 +108,14 @@ struct Prepared {
     texel: f32,
 }
 
-/// The body [`drape_cpu`] prepared last, with what identifies it: its positions (as bits)
-/// and triangles, the map resolution and the distinct view lines. A pipeline with a static
-/// body re-drapes every frame; the maps and the inside test depend on nothing else.
+/// A prepared body with what identifies it: its positions (as bits) and triangles, the map
+/// resolution and the distinct view lines. The maps and the inside test depend on nothing else.
 struct Cached {
     positions: Vec<[u32; 3]>,
     triangles: Vec<[u32; 3]>,
     resolution: u32,
     lines: Vec<[u32; 3]>,
-    prepared: Arc<Prepared>,
+    prepared: Prepared,
 }
 
 impl Cached {
@@ -134,17 +132,28 @@ impl Cached {
     }
 }
 
-/// One body, the last one prepared (a few MB at 512²: the maps and the triangle bins).
-static LAST_BODY: Mutex<Option<Cached>> = Mutex::new(None);
+/// The last body a caller draped on, kept for its next call: a pipeline with a static body
+/// re-drapes every frame, and the maps and inside test (most of a call) need not be made
+/// again. Each caller (a Drape node) holds its own, so two bodies never evict each other.
+#[derive(Default)]
+pub struct BodyCache(Option<Cached>);
 
 /// The one-shot fit on the CPU: pushes the garment's vertices out of the body in place and
 /// reports what it did. The body should be closed (see the module doc); the garment is any
 /// set of points (a mesh's positions, a cloth's particles).
-///
-/// The maps and the inside test of the last body are kept: a call on a body with the same
-/// positions and triangles (and the same resolution and view lines) reuses them, with the
-/// same result as a fresh call ([`drape_with`] always prepares afresh).
 pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Result<DrapeReport> {
+    drape_cached(&mut BodyCache::default(), body, garment, params)
+}
+
+/// [`drape_cpu`] reusing the maps and the inside test `cache` holds when `body` is the one it
+/// was made for (positions and triangles bit for bit, same resolution and view lines), with
+/// the same result as a fresh call; otherwise it prepares `body` and keeps it in `cache`.
+pub fn drape_cached(
+    cache: &mut BodyCache,
+    body: &Mesh,
+    garment: &mut [Vec3],
+    params: &DrapeParams,
+) -> Result<DrapeReport> {
     params.validate()?;
     if garment.is_empty() || body.triangles.is_empty() || body.bounds().is_empty() {
         return fit(None, body, garment, params);
@@ -154,31 +163,24 @@ pub fn drape_cpu(body: &Mesh, garment: &mut [Vec3], params: &DrapeParams) -> Res
         .map(|v| v.to_array().map(f32::to_bits))
         .collect();
     let res = params.resolution;
-    let kept = {
-        let last = LAST_BODY.lock().unwrap_or_else(|e| e.into_inner());
-        last.as_ref()
-            .filter(|c| c.is_for(body, res, &lines))
-            .map(|c| c.prepared.clone())
+    let kept = cache.0.take().filter(|c| c.is_for(body, res, &lines));
+    let cached = match kept {
+        Some(c) => c,
+        None => Cached {
+            prepared: prepare(body, params, rasterize_depth_with)?,
+            positions: body
+                .positions
+                .iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect(),
+            triangles: body.triangles.clone(),
+            resolution: res,
+            lines,
+        },
     };
-    let prepared = match kept {
-        Some(p) => p,
-        None => {
-            let p = Arc::new(prepare(body, params, rasterize_depth_with)?);
-            *LAST_BODY.lock().unwrap_or_else(|e| e.into_inner()) = Some(Cached {
-                positions: body
-                    .positions
-                    .iter()
-                    .map(|v| v.to_array().map(f32::to_bits))
-                    .collect(),
-                triangles: body.triangles.clone(),
-                resolution: res,
-                lines,
-                prepared: p.clone(),
-            });
-            p
-        }
-    };
-    fit(Some(&prepared), body, garment, params)
+    let report = fit(Some(&cached.prepared), body, garment, params);
+    cache.0 = Some(cached);
+    report
 }
 
 /// [`drape_cpu`] with the depth maps from any rasteriser with the signature of
@@ -485,9 +487,9 @@ mod tests {
     use imprint_core::mesh::primitives::torus;
 
     /// [`drape_cpu`] against a fresh preparation ([`drape_with`] keeps nothing).
-    fn same_as_fresh(body: &Mesh, garment: &[Vec3], params: &DrapeParams) {
+    fn same_as_fresh(cache: &mut BodyCache, body: &Mesh, garment: &[Vec3], params: &DrapeParams) {
         let (mut kept, mut fresh) = (garment.to_vec(), garment.to_vec());
-        let a = drape_cpu(body, &mut kept, params).unwrap();
+        let a = drape_cached(cache, body, &mut kept, params).unwrap();
         let b = drape_with(body, &mut fresh, params, rasterize_depth_with).unwrap();
         assert_eq!(a, b);
         assert_eq!(kept, fresh);
@@ -496,8 +498,7 @@ mod tests {
 
     /// The kept maps serve only the body they were made for: a second call on the same body
     /// reuses them; a moved body, a changed triangle list or another resolution is prepared
-    /// again. Each result equals a fresh drape's. (Other tests may drape other bodies in
-    /// between: the results must not depend on it.)
+    /// again. Each result equals a fresh drape's.
     #[test]
     fn a_changed_body_is_prepared_again() {
         let body = torus(0.5, 0.2, 60, 24);
@@ -506,29 +507,30 @@ mod tests {
             resolution: 96,
             ..Default::default()
         };
-        same_as_fresh(&body, &garment, &params);
-        same_as_fresh(&body, &garment, &params);
+        let mut cache = BodyCache::default();
+        same_as_fresh(&mut cache, &body, &garment, &params);
+        same_as_fresh(&mut cache, &body, &garment, &params);
         let mut moved = body.clone();
         moved.positions[7].y += 0.05;
-        same_as_fresh(&moved, &garment, &params);
+        same_as_fresh(&mut cache, &moved, &garment, &params);
         let mut shifted = body.clone();
         for p in &mut shifted.positions {
             p.x += 0.01;
         }
-        same_as_fresh(&shifted, &garment, &params);
+        same_as_fresh(&mut cache, &shifted, &garment, &params);
         let mut flipped = shifted.clone();
         flipped.triangles.rotate_left(5);
         flipped.triangles[0].swap(1, 2);
-        same_as_fresh(&flipped, &garment, &params);
+        same_as_fresh(&mut cache, &flipped, &garment, &params);
         let finer = DrapeParams {
             resolution: 128,
             ..params.clone()
         };
-        same_as_fresh(&flipped, &garment, &finer);
+        same_as_fresh(&mut cache, &flipped, &garment, &finer);
         let sideways = DrapeParams {
             views: vec![Vec3::X],
             ..params
         };
-        same_as_fresh(&flipped, &garment, &sideways);
+        same_as_fresh(&mut cache, &flipped, &garment, &sideways);
     }
 }

@@ -1,7 +1,7 @@
 //! Drape: pushing a garment out of a body with depth maps (T §(2)④, docs/methods.md §4).
 //!
 //! **Inputs.** A body (any triangle mesh, possibly deforming: each call renders it afresh,
-//! unless it is the body [`drape_cpu`] prepared last, positions and triangles bit for bit) and a
+//! unless [`drape_cached`]'s cache holds that body, positions and triangles bit for bit) and a
 //! garment: any set of points (a mesh's positions, a cloth's particles), moved in place.
 //! One call is a one-shot fit ([`drape_cpu`]); the same maps, dilated by the cloth's ε and
 //! read every substep, are a collider for the cloth ([`collider`]).
@@ -66,8 +66,9 @@
 //! vertex lands well away from where a radial (closest-point) projection would put it.
 //!
 //! **Cost.** Per body: 2 renders per distinct view line, with the inside test's three axis
-//! bins (O(triangles)) built alongside; [`drape_cpu`] keeps them for the next call on the same
-//! body (a static body draped every frame), [`drape_with`] does not. Per garment vertex an
+//! bins (O(triangles)) built alongside; [`drape_cached`] keeps them for the next call on the
+//! same body (a static body draped every frame; each Drape node holds its own [`BodyCache`]),
+//! [`drape_cpu`] and [`drape_with`] do not. Per garment vertex an
 //! inside test (three short triangle lists, whose crossings are kept); per inside vertex one
 //! lookup per view and the clean-exit check: for an axis push the crossings along it are
 //! those kept, plus at most two lists at the end and two at the pushed point (the self-check),
@@ -85,6 +86,6 @@ pub mod params;
 
 pub use body::{DepthBody, DepthBodyState};
 pub use collider::{DepthCamera, DepthCollider, DepthColliderParams, DepthPose};
-pub use cpu::{DrapeReport, Push, body_field, drape_cpu, drape_with};
+pub use cpu::{BodyCache, DrapeReport, Push, body_field, drape_cached, drape_cpu, drape_with};
 pub use inside::InsideTest;
 pub use params::{DrapeParams, Fallback};
