@@ -36,20 +36,10 @@ fn write(dir: &Path, name: &str, text: &str) -> String {
 
 /// Every file under `dir`, relative, with `/` separators.
 fn files(dir: &Path) -> BTreeSet<String> {
-    let mut all = BTreeSet::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap();
-                all.insert(rel.to_string_lossy().replace('\\', "/"));
-            }
-        }
-    }
-    all
+    common::files_under(dir)
+        .iter()
+        .map(|p| p.to_string_lossy().replace('\\', "/"))
+        .collect()
 }
 
 fn json(path: PathBuf) -> serde_json::Value {

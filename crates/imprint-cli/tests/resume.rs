@@ -96,24 +96,15 @@ fn stateful_scene_on(frames: u32, backend: &str) -> String {
 
 /// Every file under `dir` but the report, the manifest and the checkpoint, with its bytes.
 fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if !["report.json", "manifest.json", "checkpoint.bin"]
-                .contains(&p.file_name().unwrap().to_str().unwrap())
-            {
-                out.insert(
-                    p.strip_prefix(dir).unwrap().to_path_buf(),
-                    std::fs::read(&p).unwrap(),
-                );
-            }
-        }
-    }
-    out
+    let run_files = ["report.json", "manifest.json", "checkpoint.bin"];
+    common::files_under(dir)
+        .into_iter()
+        .filter(|p| !run_files.contains(&p.file_name().unwrap().to_str().unwrap()))
+        .map(|p| {
+            let bytes = std::fs::read(dir.join(&p)).unwrap();
+            (p, bytes)
+        })
+        .collect()
 }
 
 fn assert_same_outputs(whole: &Path, pieces: &Path) {

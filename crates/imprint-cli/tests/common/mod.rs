@@ -26,3 +26,21 @@ pub fn run_ok(args: &[&str], cwd: &Path) -> Output {
     );
     out
 }
+
+/// Every file under `dir`, recursively, as paths relative to it (in no set order).
+#[allow(dead_code)] // Only the tests that look at output folders use it.
+pub fn files_under(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                files.push(p.strip_prefix(dir).unwrap().to_path_buf());
+            }
+        }
+    }
+    files
+}

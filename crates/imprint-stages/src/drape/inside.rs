@@ -641,6 +641,18 @@ mod tests {
         }
     }
 
+    /// A uniform point on a random triangle of `mesh`.
+    fn point_on(mesh: &Mesh, rng: &mut Rng) -> Vec3 {
+        let tri = mesh.triangle((rng.next() * mesh.triangles.len() as f32) as usize);
+        let (u, v) = (rng.next(), rng.next());
+        let (u, v) = if u + v > 1.0 {
+            (1.0 - u, 1.0 - v)
+        } else {
+            (u, v)
+        };
+        tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0])
+    }
+
     fn boxed(min: Vec3, max: Vec3) -> Mesh {
         let mut m = cuboid(0.5 * (max - min), 2);
         let c = 0.5 * (min + max);
@@ -664,14 +676,7 @@ mod tests {
             points.push(lo + rng.vec() * size);
         }
         for _ in 0..100_000 {
-            let tri = mesh.triangle((rng.next() * mesh.triangles.len() as f32) as usize);
-            let (u, v) = (rng.next(), rng.next());
-            let (u, v) = if u + v > 1.0 {
-                (1.0 - u, 1.0 - v)
-            } else {
-                (u, v)
-            };
-            let on = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+            let on = point_on(mesh, &mut rng);
             points.push(on);
             let scale = [1e-1, 1e-2, 1e-3, 1e-5, 1e-7][(rng.next() * 5.0) as usize];
             points.push(on + (rng.vec() - 0.5) * scale);
@@ -723,14 +728,7 @@ mod tests {
             let mut points: Vec<Vec3> = mesh.positions.clone();
             for _ in 0..4_000 {
                 points.push(lo + rng.vec() * size);
-                let tri = mesh.triangle((rng.next() * mesh.triangles.len() as f32) as usize);
-                let (u, v) = (rng.next(), rng.next());
-                let (u, v) = if u + v > 1.0 {
-                    (1.0 - u, 1.0 - v)
-                } else {
-                    (u, v)
-                };
-                let on = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+                let on = point_on(&mesh, &mut rng);
                 points.push(on);
                 let scale = [1e-2, 1e-4, 1e-6, 1e-7][(rng.next() * 4.0) as usize];
                 points.push(on + (rng.vec() - 0.5) * scale);
