@@ -29,6 +29,7 @@ macro_rules! outln {
     }};
 }
 
+mod farm;
 mod log;
 mod schema_cmd;
 mod sweep;
@@ -148,6 +149,10 @@ enum Command {
     /// Run a pipeline over a grid of settings; time and error of each against a reference:
     /// DIR/sweep.csv, sweep.md, sweep.png (time against error, Pareto front marked).
     Sweep(sweep::SweepArgs),
+    /// Hand the work to a farm: write a Slurm array or an OpenJD job template of resumable
+    /// tasks (a sweep's settings, or frame chunks), and gather their results with
+    /// `imprint farm collect DIR`.
+    Farm(farm::FarmCommand),
     /// Stability map of a pipeline's Cloth node: stiffness multipliers × substep over the
     /// estimated critical step; each cell runs the cloth (perturbed, no colliders) and says
     /// whether it stayed stable or blew up.
@@ -422,6 +427,11 @@ fn execute(cmd: Command) -> imprint_graph::Result<()> {
             Ok(())
         }
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Farm(cmd) => match (cmd.collect, cmd.job) {
+            (Some(farm::FarmSub::Collect { dir }), _) => farm::collect(&dir),
+            (None, Some(job)) => farm::farm(&job),
+            (None, None) => unreachable!("clap requires FILE without a subcommand"),
+        },
         Command::Schema { what } => schema_cmd::print(what),
         Command::Completions { shell } => {
             use clap::CommandFactory;

@@ -16,6 +16,7 @@
 
 mod measure;
 mod plot;
+pub(crate) mod task;
 
 use imprint_core::io::atomic_write_bytes;
 use imprint_graph::exec::{RunOptions, run_observed};
@@ -23,6 +24,7 @@ use imprint_graph::schema::Backend;
 use imprint_graph::{Error, Plan, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use measure::{Cache, Comparer, FrameError, Recorder, Reference, Timing, TrackKind};
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::ops::Range;
@@ -57,6 +59,14 @@ pub struct SweepArgs {
     /// (DistanceField, Cloth, Heightmap); a cloth's max, the others' rms.
     #[arg(long, value_name = "NODE[.STAT]")]
     error: Option<String>,
+    /// Run one task of a farm job (`imprint farm`) and nothing else: `ref` (the reference,
+    /// into its cache) or a setting's number (into DIR/runs/N/, its row in row.json).
+    /// Resumes from the task's checkpoint when an earlier try left one.
+    #[arg(long, value_name = "ref|N")]
+    pub(crate) task: Option<String>,
+    /// With --task: keep a checkpoint every N frames, for a retry to resume from.
+    #[arg(long, value_name = "N", requires = "task", default_value_t = 10)]
+    pub(crate) checkpoint_every: u32,
 }
 
 /// One `--vary` (or, with one value, `--reference`): a node's field and its values.
@@ -181,8 +191,9 @@ fn load_setting(args: &SweepArgs, what: &str, overrides: &[String]) -> Result<Pl
     })
 }
 
-/// One row of the results.
-struct Row {
+/// One row of the results (a farm task's `row.json`).
+#[derive(Serialize, Deserialize)]
+pub(crate) struct Row {
     /// `ref`, or the setting's number from 1.
     id: String,
     /// The overrides that make this setting.
@@ -287,8 +298,41 @@ fn stat_column(node: &str, kind: TrackKind, stat: &str) -> String {
     format!("{node}_{}_{stat}{}", kind.quantity(), kind.unit_suffix())
 }
 
-/// Runs the sweep; writes DIR/sweep.{csv,md,png} and DIR/sweep_frames.csv.
-pub fn sweep(args: &SweepArgs) -> Result<()> {
+/// Everything checked before anything runs: the settings, their plans, the reference's.
+pub(crate) struct Setup {
+    vary: Vec<Vary>,
+    ref_overrides: Vec<String>,
+    ref_plan: Plan,
+    combos: Vec<Vec<String>>,
+    plans: Vec<Plan>,
+    primary: Option<Primary>,
+    frames: Range<u32>,
+    backend: Option<Backend>,
+    cache: Cache,
+}
+
+impl Setup {
+    /// The settings' ids: their numbers from 1, zero-padded to one width.
+    pub(crate) fn ids(&self) -> Vec<String> {
+        let width = self.combos.len().to_string().len();
+        (1..=self.combos.len())
+            .map(|i| format!("{i:0width$}"))
+            .collect()
+    }
+
+    /// The run options of one run into `out`.
+    fn opts(&self, out: PathBuf) -> RunOptions {
+        RunOptions {
+            out,
+            frames: Some(self.frames.clone()),
+            backend: self.backend,
+            ..Default::default()
+        }
+    }
+}
+
+/// Parses and checks the arguments, and loads every setting's pipeline.
+pub(crate) fn prepare(args: &SweepArgs) -> Result<Setup> {
     let vary: Vec<Vary> = args
         .vary
         .iter()
@@ -310,7 +354,6 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
     check_paths("--vary", &vary, &base)?;
     check_paths("--reference", &reference, &base)?;
 
-    // Every setting is checked before anything runs.
     let ref_overrides: Vec<String> = reference
         .iter()
         .map(|r| format!("{}={}", r.path, r.values[0]))
@@ -330,30 +373,48 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             frames.start, frames.end, ref_plan.file.frames
         )));
     }
+    let backend: Option<Backend> = args.backend.map(Into::into);
+    let backend_key = backend.map_or_else(|| "file".to_string(), |b| format!("{b:?}"));
+    let cache = Cache::new(
+        &args.out.join("reference"),
+        &ref_plan,
+        &frames,
+        &backend_key,
+    );
+    Ok(Setup {
+        vary,
+        ref_overrides,
+        ref_plan,
+        combos,
+        plans,
+        primary,
+        frames,
+        backend,
+        cache,
+    })
+}
 
-    let backend_override: Option<Backend> = args.backend.map(Into::into);
-    let backend = backend_override.map_or_else(|| "file".to_string(), |b| format!("{b:?}"));
-    let cache = Cache::new(&args.out.join("reference"), &ref_plan, &frames, &backend);
-    let cached = match cache.load() {
+/// Runs the sweep; writes DIR/sweep.{csv,md,png} and DIR/sweep_frames.csv. With `--task`,
+/// runs that one task of a farm job instead ([`task`]).
+pub fn sweep(args: &SweepArgs) -> Result<()> {
+    let setup = prepare(args)?;
+    if let Some(id) = &args.task {
+        return task::run(args, &setup, id);
+    }
+    let cached = match setup.cache.load() {
         Ok(r) => r,
         Err(why) => {
             outln!("reference: the cache cannot be used ({why}); running it again");
             None
         }
     };
-    let bar = progress_bar((combos.len() + usize::from(cached.is_none())) as u64);
-    let opts = |out: PathBuf| RunOptions {
-        out,
-        frames: Some(frames.clone()),
-        backend: backend_override,
-        ..Default::default()
-    };
+    let bar = progress_bar((setup.combos.len() + usize::from(cached.is_none())) as u64);
     let reference = match cached {
         Some(r) => {
             outln!(
                 "reference: reusing the cached run in {} (same pipeline text, frames and \
                  backend; delete it to run the reference again)",
-                cache.dir.display()
+                setup.cache.dir.display()
             );
             r
         }
@@ -362,81 +423,121 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                 &bar,
                 format!(
                     "reference: running it ({}), cached in {}",
-                    label(&ref_overrides, "the file as it is"),
-                    cache.dir.display()
+                    label(&setup.ref_overrides, "the file as it is"),
+                    setup.cache.dir.display()
                 ),
             );
-            let mut rec = Recorder::new(&ref_plan);
-            let report = run_observed(
-                &ref_plan,
-                &opts(cache.dir.join("run")),
-                &mut frame_progress(&bar, "reference"),
-                Some(&mut rec),
-            )?;
-            let r = rec.finish(&report);
-            cache.save(&ref_plan.source.name, &r)?;
+            let r = run_reference(&setup, setup.opts(setup.cache.dir.join("run")), &bar)?;
             bar.inc(1);
             r
         }
     };
-
-    let mut rows = vec![Row {
-        id: "ref".into(),
-        overrides: ref_overrides.clone(),
-        status: "ok".into(),
-        timing: Some(reference.timing.clone()),
-        errors: reference.zero_errors(),
-    }];
-    let width = combos.len().to_string().len();
-    for (i, (overrides, plan)) in combos.iter().zip(&plans).enumerate() {
-        let id = format!("{:0width$}", i + 1);
-        let what = label(overrides, "");
-        let mut cmp = Comparer::new(&reference);
-        let run = run_observed(
-            plan,
-            &opts(args.out.join("runs").join(&id)),
-            &mut frame_progress(&bar, &what),
-            Some(&mut cmp),
-        );
-        let row = match run {
-            Ok(report) => Row {
-                status: if cmp.notes.is_empty() {
-                    "ok".into()
-                } else {
-                    cmp.notes.iter().cloned().collect::<Vec<_>>().join("; ")
-                },
-                timing: Some(cmp.timing(&report, plan)),
-                errors: std::mem::take(&mut cmp.errors),
-                id,
-                overrides: overrides.clone(),
-            },
-            Err(e) => Row {
-                status: format!("failed: {e}"),
-                timing: None,
-                errors: BTreeMap::new(),
-                id,
-                overrides: overrides.clone(),
-            },
-        };
+    let mut rows = vec![reference_row(&setup, &reference)];
+    for (i, id) in setup.ids().into_iter().enumerate() {
+        let row = run_setting(&setup, &reference, i, id, setup.opts_for(args, i), &bar);
         say(
             &bar,
-            format!("[{}/{}] {what}: {}", i + 1, combos.len(), summary(&row)),
+            format!(
+                "[{}/{}] {}: {}",
+                i + 1,
+                setup.combos.len(),
+                label(&row.overrides, ""),
+                summary(&row)
+            ),
         );
         rows.push(row);
         bar.inc(1);
     }
     bar.finish_and_clear();
+    write_results(args, &setup, &reference, &rows)
+}
 
-    let pareto = pareto_of(&rows, primary.as_ref());
-    let table = results_table(&rows, &vary, &reference, &ref_plan, &pareto);
+impl Setup {
+    /// Options of setting `i`'s run: its writers into DIR/runs/<id>/.
+    fn opts_for(&self, args: &SweepArgs, i: usize) -> RunOptions {
+        self.opts(args.out.join("runs").join(&self.ids()[i]))
+    }
+}
+
+/// Runs the reference with `opts`, recording its tracks, and saves it in the cache.
+fn run_reference(setup: &Setup, opts: RunOptions, bar: &ProgressBar) -> Result<Reference> {
+    let mut rec = Recorder::new(&setup.ref_plan);
+    let report = run_observed(
+        &setup.ref_plan,
+        &opts,
+        &mut frame_progress(bar, "reference"),
+        Some(&mut rec),
+    )?;
+    let r = rec.finish(&report);
+    setup.cache.save(&setup.ref_plan.source.name, &r)?;
+    Ok(r)
+}
+
+/// The reference's own row: zero error by definition.
+fn reference_row(setup: &Setup, reference: &Reference) -> Row {
+    Row {
+        id: "ref".into(),
+        overrides: setup.ref_overrides.clone(),
+        status: "ok".into(),
+        timing: Some(reference.timing.clone()),
+        errors: reference.zero_errors(),
+    }
+}
+
+/// Runs setting `i` (id `id`) with `opts`, compared with the reference as it goes.
+fn run_setting(
+    setup: &Setup,
+    reference: &Reference,
+    i: usize,
+    id: String,
+    opts: RunOptions,
+    bar: &ProgressBar,
+) -> Row {
+    let (overrides, plan) = (&setup.combos[i], &setup.plans[i]);
+    let what = label(overrides, "");
+    let mut cmp = Comparer::new(reference);
+    let run = run_observed(plan, &opts, &mut frame_progress(bar, &what), Some(&mut cmp));
+    match run {
+        Ok(report) => Row {
+            status: if cmp.notes.is_empty() {
+                "ok".into()
+            } else {
+                cmp.notes.iter().cloned().collect::<Vec<_>>().join("; ")
+            },
+            timing: Some(cmp.timing(&report, plan)),
+            errors: std::mem::take(&mut cmp.errors),
+            id,
+            overrides: overrides.clone(),
+        },
+        Err(e) => Row {
+            status: format!("failed: {e}"),
+            timing: None,
+            errors: BTreeMap::new(),
+            id,
+            overrides: overrides.clone(),
+        },
+    }
+}
+
+/// Writes sweep.csv, sweep_frames.csv, sweep.md and sweep.png from the rows (the reference's
+/// first); fails when a setting failed.
+fn write_results(
+    args: &SweepArgs,
+    setup: &Setup,
+    reference: &Reference,
+    rows: &[Row],
+) -> Result<()> {
+    let (vary, primary) = (&setup.vary, setup.primary.as_ref());
+    let pareto = pareto_of(rows, primary);
+    let table = results_table(rows, vary, reference, &setup.ref_plan, &pareto);
     let out = &args.out;
     atomic_write_bytes(&out.join("sweep.csv"), table.csv().as_bytes())?;
-    atomic_write_bytes(&out.join("sweep_frames.csv"), frames_csv(&rows).as_bytes())?;
-    let md = markdown(args, &ref_overrides, &frames, primary.as_ref(), &table);
+    atomic_write_bytes(&out.join("sweep_frames.csv"), frames_csv(rows).as_bytes())?;
+    let md = markdown(args, &setup.ref_overrides, &setup.frames, primary, &table);
     atomic_write_bytes(&out.join("sweep.md"), md.as_bytes())?;
-    match &primary {
+    match primary {
         Some(p) => {
-            let points = plot_points(&rows, p, &vary, &pareto);
+            let points = plot_points(rows, p, vary, &pareto);
             let name = args.file.file_name().map_or_else(
                 || args.file.display().to_string(),
                 |n| n.to_string_lossy().into(),
@@ -470,7 +571,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         return Err(imprint_core::Error::Run(format!(
             "{} of {} settings failed (setting {}); the status column says why",
             failed.len(),
-            combos.len(),
+            setup.combos.len(),
             failed.join(", ")
         ))
         .into());

@@ -29,6 +29,9 @@ fn imprint(args: &[&str], cwd: &Path) -> Said {
 }
 
 /// Runs `imprint`, expecting success; its stdout.
+mod common;
+use common::scenes::untimed_csv;
+
 fn run_ok(args: &[&str], cwd: &Path) -> String {
     let said = imprint(args, cwd);
     assert_eq!(said.code, Some(0), "{}", said.err);
@@ -206,23 +209,7 @@ fn second_sweep_reuses_the_cached_reference_and_writes_the_same_errors() {
     );
     let csv2 = std::fs::read_to_string(dir.path().join("s/sweep.csv")).unwrap();
     // Same inputs, same bytes, but for the timing columns (and the Pareto front they decide).
-    let untimed = |csv: &str| -> Vec<Vec<String>> {
-        let mut lines = csv
-            .lines()
-            .map(|l| l.split(',').map(String::from).collect::<Vec<_>>());
-        let header = lines.next().unwrap();
-        let keep: Vec<usize> = (0..header.len())
-            .filter(|&i| {
-                let h = &header[i];
-                !(h.starts_with("frame_ms_") || h.ends_with("_ms_per_frame") || h == "pareto")
-            })
-            .collect();
-        std::iter::once(header)
-            .chain(lines)
-            .map(|r| keep.iter().map(|&i| r[i].clone()).collect())
-            .collect()
-    };
-    assert_eq!(untimed(&csv1), untimed(&csv2));
+    assert_eq!(untimed_csv(&csv1), untimed_csv(&csv2));
     // A different reference is not taken for the cached one.
     let other = run_ok(
         &sweep_args(&[

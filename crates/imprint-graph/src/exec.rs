@@ -40,6 +40,8 @@ pub struct Run {
     opts: RunOptions,
     /// The folder's manifest before this run (empty when it had none).
     previous: Manifest,
+    /// What the run's observer had gathered, when resumed from a checkpoint.
+    observed: Option<Vec<u8>>,
 }
 
 impl Run {
@@ -48,15 +50,18 @@ impl Run {
     pub fn start(plan: &Plan, opts: &RunOptions) -> crate::Result<Run> {
         let previous = Manifest::read(&opts.out)?.unwrap_or_default();
         let mut ex = Executor::new(plan, opts.clone())?;
+        let mut observed = None;
         if opts.resume {
             let c = Checkpoint::read_dir(&opts.out)?;
             ex.restore(&c)?;
             ex.report.resumed_at = Some(c.next_frame());
+            observed = Some(c.observer().to_vec());
         }
         Ok(Run {
             ex,
             opts: opts.clone(),
             previous,
+            observed,
         })
     }
 
@@ -69,12 +74,22 @@ impl Run {
         &self.ex
     }
 
-    /// Runs the remaining frames, then the whole-run writers; writes `report.json`.
+    /// Runs the remaining frames, then the whole-run writers; writes `report.json`. Resumed,
+    /// `observer` first takes back what it had gathered before the checkpoint.
     pub fn finish(
         mut self,
         progress: &mut dyn FnMut(u32, u32),
         mut observer: Option<&mut dyn Observer>,
     ) -> crate::Result<Report> {
+        if let (Some(o), Some(bytes)) = (observer.as_mut(), &self.observed) {
+            o.load(bytes).map_err(|why| {
+                Error::Invalid(format!(
+                    "--resume: the checkpoint in {} cannot be continued by this command ({why}); \
+                     run without --resume",
+                    self.opts.out.display()
+                ))
+            })?;
+        }
         let total = self.ex.frames().len() as u32;
         while !self.ex.done() {
             let stop = self.opts.stop.as_ref();
@@ -82,28 +97,29 @@ impl Run {
                 let e = Error::Interrupted {
                     frame: self.ex.next_frame(),
                 };
-                return Err(self.stopped(e.into()));
+                return Err(self.stopped(e.into(), observed_state(&observer)));
             }
             let obs: Option<&mut dyn Observer> = match observer {
                 Some(ref mut o) => Some(&mut **o),
                 None => None,
             };
             if let Err(e) = self.ex.step_observed(obs) {
-                return Err(self.stopped(e));
+                return Err(self.stopped(e, observed_state(&observer)));
             }
             let ex = &self.ex;
             progress(ex.next_frame() - ex.frames().start, total);
             let every = self.opts.checkpoint_every;
             let since = ex.next_frame() - ex.frames().start;
             if every > 0 && since.is_multiple_of(every) && !ex.done() {
-                self.save_checkpoint()?;
+                self.save_checkpoint(observed_state(&observer))?;
             }
         }
         if self.opts.checkpoint_every > 0 {
             // Before the whole-run writers: a later run may go on from here.
-            self.save_checkpoint()?;
+            self.save_checkpoint(observed_state(&observer))?;
         }
         let mut report = self.ex.finish()?;
+        report.complete = true;
         let mut manifest = self.manifest();
         report.stale_removed = manifest.remove_stale(&self.opts.out)?;
         manifest.write(&self.opts.out)?;
@@ -132,11 +148,12 @@ impl Run {
         m
     }
 
-    /// The checkpoint, the manifest and the report so far, in `out` (a run killed later
-    /// leaves all three).
-    fn save_checkpoint(&self) -> crate::Result<()> {
+    /// The checkpoint (with what the observer gathered), the manifest and the report so
+    /// far, in `out` (a run killed later leaves all three).
+    fn save_checkpoint(&self, observed: Vec<u8>) -> crate::Result<()> {
         let out = &self.opts.out;
-        self.ex.checkpoint()?.write(&checkpoint_path(out))?;
+        let c = self.ex.checkpoint()?.with_observer(observed);
+        c.write(&checkpoint_path(out))?;
         self.manifest().write(out)?;
         write_report(&self.ex.report(), out)
     }
@@ -144,7 +161,7 @@ impl Run {
     /// A run that stopped early: its report says how far it got and why; with checkpoints,
     /// the state before the failed frame is kept too. Nothing is removed: the manifest lists
     /// the earlier run's files as stale, for the next complete run.
-    fn stopped(&self, e: crate::Error) -> crate::Error {
+    fn stopped(&self, e: crate::Error, observed: Vec<u8>) -> crate::Error {
         let (ex, opts) = (&self.ex, &self.opts);
         let mut report = ex.report();
         report.error = Some(e.to_string());
@@ -152,12 +169,18 @@ impl Run {
         let _ = write_report(&report, &opts.out);
         let interrupted = matches!(&e, crate::Error::Core(Error::Interrupted { .. }));
         if opts.checkpoint_every > 0 && interrupted {
-            let _ = ex
-                .checkpoint()
-                .and_then(|c| Ok(c.write(&checkpoint_path(&opts.out))?));
+            let _ = ex.checkpoint().and_then(|c| {
+                let c = c.with_observer(observed);
+                Ok(c.write(&checkpoint_path(&opts.out))?)
+            });
         }
         e
     }
+}
+
+/// What `observer` gathered so far (empty without one).
+fn observed_state(observer: &Option<&mut dyn Observer>) -> Vec<u8> {
+    observer.as_ref().map_or_else(Vec::new, |o| o.save())
 }
 
 fn write_report(report: &Report, out: &Path) -> crate::Result<()> {

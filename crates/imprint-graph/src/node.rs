@@ -109,6 +109,12 @@ pub trait Node: Any {
     fn track(&self) -> Option<Track> {
         None
     }
+    /// Whether it writes a file from the whole run at its end (an animated GLB, a contact
+    /// sheet, a GIF): that file depends on every frame, so a run cut into frame ranges that
+    /// run apart cannot write it (`imprint farm` chains such ranges instead).
+    fn writes_whole_run(&self) -> bool {
+        false
+    }
     /// The box the node's mesh sweeps over the run, when it is known before running.
     fn swept_bounds(&self, _ctx: &CheckCtx<'_>) -> imprint_core::Result<Option<Aabb>> {
         Ok(None)

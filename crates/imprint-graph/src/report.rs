@@ -176,6 +176,10 @@ pub struct Report {
     /// Why the run stopped early, when it did (the frames above are those done).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Whether the run did all its frames and its whole-run writers: false in a report
+    /// written at a checkpoint or by a run that stopped early.
+    #[serde(default)]
+    pub complete: bool,
     /// The frame the run resumed at, when it continued from a checkpoint.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resumed_at: Option<u32>,

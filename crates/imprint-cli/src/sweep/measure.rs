@@ -353,6 +353,15 @@ impl<'a> Recorder<'a> {
 }
 
 impl Observer for Recorder<'_> {
+    fn save(&self) -> Vec<u8> {
+        save_or_empty(&(&self.tracks, &self.data))
+    }
+
+    fn load(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
+        (self.tracks, self.data) = load_saved(bytes, "the reference's probes")?;
+        Ok(())
+    }
+
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>) {
         let Some(kind) = self.plan.file.nodes.get(node).and_then(TrackKind::of) else {
             return;
@@ -384,7 +393,7 @@ impl Observer for Recorder<'_> {
 }
 
 /// One frame's error statistics for one node.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameError {
     pub frame: u32,
     /// Probes (or particles) compared.
@@ -513,11 +522,37 @@ impl Comparer<'_> {
 }
 
 impl Observer for Comparer<'_> {
+    fn save(&self) -> Vec<u8> {
+        save_or_empty(&(&self.errors, &self.notes))
+    }
+
+    fn load(&mut self, bytes: &[u8]) -> std::result::Result<(), String> {
+        (self.errors, self.notes) = load_saved(bytes, "the errors measured so far")?;
+        Ok(())
+    }
+
     fn observe(&mut self, node: &str, frame: u32, value: Observed<'_>) {
         if let Some(err) = self.compare(node, frame, value) {
             self.errors.entry(node.to_string()).or_default().push(err);
         }
     }
+}
+
+/// An observer's state as a checkpoint keeps it (plain data: serialising cannot fail).
+fn save_or_empty<T: Serialize>(state: &T) -> Vec<u8> {
+    imprint_graph::node::save_state(state).expect("plain data serialises")
+}
+
+/// Reads back [`save_or_empty`]'s bytes; `what` names them when they are missing (a
+/// checkpoint of a run that had no such observer) or unreadable.
+fn load_saved<T: for<'de> Deserialize<'de>>(
+    bytes: &[u8],
+    what: &str,
+) -> std::result::Result<T, String> {
+    if bytes.is_empty() {
+        return Err(format!("it holds no record of {what}"));
+    }
+    imprint_graph::node::load_state(bytes).map_err(|e| format!("{what}: {e}"))
 }
 
 #[cfg(test)]

@@ -1,10 +1,13 @@
 //! What every CLI test does: run the built `imprint` in a folder.
 
+pub mod scenes;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs the built binary in `cwd` (with a runtime folder, so the graphics stack's probe has
 /// one, and the default log level whatever `IMPRINT_LOG` the test runner has).
+#[allow(dead_code)] // The sweep tests run it their own way.
 pub fn imprint(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_imprint"))
         .args(args)
@@ -16,6 +19,7 @@ pub fn imprint(args: &[&str], cwd: &Path) -> Output {
 }
 
 /// Runs `imprint` and expects success, showing its arguments and stderr otherwise.
+#[allow(dead_code)] // The sweep tests run it their own way.
 pub fn run_ok(args: &[&str], cwd: &Path) -> Output {
     let out = imprint(args, cwd);
     assert_eq!(

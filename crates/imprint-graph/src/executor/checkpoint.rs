@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 
 /// First bytes of a checkpoint file (its format version is the last number).
-const MAGIC: &[u8] = b"imprint checkpoint 1\n";
+const MAGIC: &[u8] = b"imprint checkpoint 2\n";
 
 /// An executor's state between two frames.
 #[derive(Serialize, Deserialize)]
@@ -33,6 +33,8 @@ pub struct Checkpoint {
     stages: BTreeMap<String, Vec<u8>>,
     /// The report so far (JSON: its metrics are free-form).
     report: String,
+    /// What the run's observer gathered so far ([`super::Observer::save`]; empty: none).
+    observer: Vec<u8>,
 }
 
 impl Checkpoint {
@@ -44,6 +46,17 @@ impl Checkpoint {
     /// The first frame of the run that wrote it.
     pub fn first_frame(&self) -> u32 {
         self.first
+    }
+
+    /// What the run's observer had gathered ([`super::Observer::save`]).
+    pub fn observer(&self) -> &[u8] {
+        &self.observer
+    }
+
+    /// Keeps what the run's observer has gathered with the executor's state.
+    pub fn with_observer(mut self, bytes: Vec<u8>) -> Self {
+        self.observer = bytes;
+        self
     }
 
     pub fn to_bytes(&self) -> imprint_core::Result<Vec<u8>> {
@@ -110,6 +123,7 @@ impl Executor {
             values: self.values.snapshot(self.gpu)?,
             stages,
             report: serde_json::to_string(&self.report()).expect("plain data"),
+            observer: Vec::new(),
         })
     }
 

@@ -44,4 +44,16 @@ pub trait Observer {
     fn wants(&self, _node: &str) -> bool {
         true
     }
+
+    /// What it gathered so far, kept in the run's checkpoint so that a resumed run's observer
+    /// goes on where the interrupted one stopped (empty: nothing to keep).
+    fn save(&self) -> Vec<u8> {
+        Vec::new()
+    }
+
+    /// Takes back what [`Observer::save`] gave, before a resumed run's first frame; `Err`
+    /// says why it cannot (the resume is refused with it).
+    fn load(&mut self, _bytes: &[u8]) -> Result<(), String> {
+        Ok(())
+    }
 }

@@ -268,6 +268,9 @@ impl Node for RenderNode {
     fn schedule(&self) -> Schedule {
         Schedule::every(self.every, self.offset)
     }
+    fn writes_whole_run(&self) -> bool {
+        self.contact_sheet.is_some() || self.gif.is_some()
+    }
     fn backend(&self) -> Option<Backend> {
         self.backend
     }

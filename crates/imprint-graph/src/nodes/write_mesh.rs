@@ -81,6 +81,9 @@ impl Node for WriteMeshNode {
     fn schedule(&self) -> Schedule {
         Schedule::every(self.every, self.offset)
     }
+    fn writes_whole_run(&self) -> bool {
+        self.format == MeshFormat::Glb
+    }
     fn check(&self, _ctx: &CheckCtx<'_>) -> crate::Result<()> {
         Ok(())
     }
