@@ -82,6 +82,7 @@ struct CheckpointFields {
     values: ValuesSnapshot,
     stages: BTreeMap<String, Vec<u8>>,
     report: String,
+    observer: Vec<u8>,
 }
 
 /// Changes node `node`'s saved state in the checkpoint of `dir` with `edit`.
