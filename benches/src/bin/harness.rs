@@ -51,8 +51,45 @@ const SECTIONS: [(&str, &str); 12] = [
     ("view", "the live viewer under Xvfb: fps held, sim/draw/UI"),
 ];
 
+/// What `--help` prints, and what a flag it does not know gets.
+fn usage() -> String {
+    let sections: Vec<String> = SECTIONS
+        .iter()
+        .map(|(name, what)| format!("  {name:<11} {what}"))
+        .collect();
+    format!(
+        "usage: harness [--only SECTION[,SECTION…]] [--repeat N] [--out FILE] [--assemble]\n\
+         Measures the sections (all without --only; N repeats, default 15), writes\n\
+         benches/results/SECTION.md and assembles FILE (default BENCHMARKS.md); --assemble\n\
+         measures nothing and only assembles.\nsections:\n{}",
+        sections.join("\n")
+    )
+}
+
+/// Refuses flags the harness does not know (a typo must not start an hour of measuring).
+fn check_flags(args: &[String]) {
+    let mut rest = args.iter().skip(1);
+    while let Some(a) = rest.next() {
+        match a.as_str() {
+            "--help" | "-h" => {
+                println!("{}", usage());
+                std::process::exit(0);
+            }
+            "--only" | "--repeat" | "--out" => {
+                rest.next();
+            }
+            "--assemble" => {}
+            other => {
+                eprintln!("error: unknown argument {other}\n{}", usage());
+                std::process::exit(2);
+            }
+        }
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    check_flags(&args);
     let arg = |k: &str| {
         args.iter()
             .position(|a| a == k)

@@ -275,6 +275,13 @@ pub fn farm(args: &FarmArgs) -> Result<()> {
     match submit_with {
         Some(tool) => submit(&job, &tool),
         None => {
+            if find_on_path(job.engine.command()).is_none() {
+                outln!(
+                    "note: `{}` is not on this machine's PATH: submit from one that has it ({})",
+                    job.engine.command(),
+                    job.engine.install_hint()
+                );
+            }
             outln!("submit: {}", submit_hint(&job));
             outln!(
                 "then gather the results: {}",
