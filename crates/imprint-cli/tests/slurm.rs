@@ -72,14 +72,11 @@ impl Cluster {
         String::from_utf8_lossy(&out.stdout).into_owned()
     }
 
-    /// Submits the job in `job` with its submit.sh; returns (name, job id) per line.
+    /// Submits the job in `job` with its submit.sh; returns (name, job id) per job.
     fn submit(&self, job: &Path) -> Vec<(String, String)> {
         let script = job.join("slurm/submit.sh");
-        let said = self.run("bash", &[script.to_str().unwrap()]);
-        said.lines()
-            .filter_map(|l| l.split_once(' '))
-            .map(|(a, b)| (a.to_string(), b.trim().to_string()))
-            .collect()
+        self.run("bash", &[script.to_str().unwrap()]);
+        submitted(job)
     }
 
     /// Waits until none of `ids` is pending or running.
@@ -125,6 +122,16 @@ impl Drop for Cluster {
             .args(["stop", self.dir.to_str().unwrap()])
             .output();
     }
+}
+
+/// The jobs submit.sh submitted last, (name, job id), from `slurm/submitted`.
+fn submitted(job: &Path) -> Vec<(String, String)> {
+    std::fs::read_to_string(job.join("slurm/submitted"))
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_once(' '))
+        .map(|(a, b)| (a.to_string(), b.trim().to_string()))
+        .collect()
 }
 
 fn id_of<'a>(jobs: &'a [(String, String)], name: &str) -> &'a str {
@@ -211,17 +218,20 @@ fn slurm_runs_the_jobs_and_a_killed_task_resumes() {
         "--set",
         "render.enabled=false",
     ];
-    let mut args = vec![
-        "farm",
-        f,
-        "--engine",
-        "slurm",
-        "--out",
-        sweep.to_str().unwrap(),
-    ];
-    args.extend(vary);
-    run_ok(&args, tmp.path());
-    let jobs = cluster.submit(&sweep);
+    // Submitted by `imprint farm --submit` itself.
+    let out = Command::new(env!("CARGO_BIN_EXE_imprint"))
+        .args(["farm", f, "--engine", "slurm", "--submit", "--out"])
+        .arg(&sweep)
+        .args(vary)
+        .env("SLURM_CONF", &cluster.conf)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let jobs = submitted(&sweep);
     let ids: Vec<&str> = jobs.iter().map(|(_, id)| id.as_str()).collect();
     cluster.wait(&ids);
     assert_eq!(
