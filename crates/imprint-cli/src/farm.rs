@@ -50,7 +50,10 @@ pub enum FarmSub {
     /// Say which tasks of the job in DIR are done, failed or missing; with all done, gather
     /// their results (a sweep's table and plot; frame chunks' files and one report.json in
     /// DIR/out). Exit 2, writing nothing, when a task is missing.
-    Collect { dir: PathBuf },
+    Collect {
+        /// The job's folder (what `imprint farm` was given as --out).
+        dir: PathBuf,
+    },
 }
 
 /// What `imprint farm FILE` takes.
