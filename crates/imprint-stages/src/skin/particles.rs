@@ -571,6 +571,44 @@ impl ParticleSkin {
         frame: u32,
         dt_frame: f32,
     ) -> Result<ParticleFrameMetrics> {
+        self.check_frame_inputs(start, end, dt_frame)?;
+        let split = |m: &Affine3A| {
+            let (_, r, t) = m.to_scale_rotation_translation();
+            (r.normalize(), t)
+        };
+        let s0: Vec<(Quat, Vec3)> = start.iter().map(split).collect();
+        let s1: Vec<(Quat, Vec3)> = end.iter().map(split).collect();
+        let substeps = self.params.substeps;
+        let h = dt_frame / substeps as f32;
+        for s in 0..substeps {
+            let corotated = self.params.spring == Spring::Corotated;
+            let kv = self.params.volume_stiffness;
+            if corotated || kv > 0.0 {
+                self.rotations_and_volumes(corotated);
+            }
+            self.pair_forces(corotated, kv);
+            let tf_next = bone_poses(&s0, &s1, (s + 1) as f32 / substeps as f32);
+            // The first substep starts from the bones at the frame's start; the others from
+            // the last one's end targets.
+            let first = (s == 0).then(|| bone_poses(&s0, &s1, 0.0));
+            if let Some((i, dev)) = self.integrate(first.as_deref(), &tf_next, h) {
+                return Err(self.blow_up(frame, i, dev, s + 1, h));
+            }
+        }
+        self.bone_rot = s1.iter().map(|&(q, _)| q).collect();
+        for (d, &p) in self.x.iter_mut().zip(&self.xa) {
+            *d = p.into();
+        }
+        Ok(self.frame_metrics(&s1, h))
+    }
+
+    /// Refuses transforms of another bone count, non-finite ones and a frame length ≤ 0.
+    fn check_frame_inputs(
+        &self,
+        start: &[Affine3A],
+        end: &[Affine3A],
+        dt_frame: f32,
+    ) -> Result<()> {
         if start.len() != self.bones || end.len() != self.bones {
             return Err(Error::Invalid(format!(
                 "particle skinning: {} bones, but {} start and {} end transforms",
@@ -594,220 +632,203 @@ impl ParticleSkin {
                 "particle skinning: frame length {dt_frame} s must be > 0"
             )));
         }
-        let split = |m: &Affine3A| {
-            let (_, r, t) = m.to_scale_rotation_translation();
-            (r.normalize(), t)
-        };
-        let s0: Vec<(Quat, Vec3)> = start.iter().map(split).collect();
-        let s1: Vec<(Quat, Vec3)> = end.iter().map(split).collect();
-        let substeps = self.params.substeps;
-        let h = dt_frame / substeps as f32;
+        Ok(())
+    }
+
+    /// Pass 0 of a substep: each particle's rotation (one round from the last one) and its
+    /// neighbourhood's volume change J = det(A B⁻¹).
+    fn rotations_and_volumes(&mut self, corotated: bool) {
+        let (x, rest, st, nb, rot, binv) = (
+            &self.xa,
+            &self.rest_off,
+            &self.start,
+            &self.nbr,
+            &self.rot,
+            &self.rest_inv,
+        );
+        self.rot_new
+            .par_chunks_mut(CHUNK)
+            .zip(self.jac.par_chunks_mut(CHUNK))
+            .zip(self.half_rot.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, ((out, jac), hr))| {
+                for k in 0..out.len() {
+                    let i = c * CHUNK + k;
+                    let r = st[i] as usize..st[i + 1] as usize;
+                    let a = neighbourhood(x, &nb[r.clone()], &rest[r], i);
+                    if corotated {
+                        out[k] = extract_rotation(&a, rot[i], 1);
+                        hr[k] = Mat3A::from_quat(out[k]) * 0.5;
+                    }
+                    // det(A B⁻¹) as det A / det B: exactly 1 at rest; bounded (JAC_RANGE),
+                    // as a neighbourhood nearly flat at rest gives wild ratios from small
+                    // moves.
+                    jac[k] = match binv[i] {
+                        Some(b) => (a.determinant() / b).clamp(JAC_RANGE.0, JAC_RANGE.1),
+                        None => 1.0,
+                    };
+                }
+            });
+        if corotated {
+            std::mem::swap(&mut self.rot, &mut self.rot_new);
+        }
+    }
+
+    /// Pass 1 of a substep: each pair's force from x_n and the estimated v_n, once, from its
+    /// lower end (the pair's term is exactly antisymmetric: negating both offsets negates
+    /// every product, and the pressure's J̄ is summed symmetrically).
+    fn pair_forces(&mut self, corotated: bool, kv: f32) {
         let p = &self.params;
-        let (ks, cs, kb, cb) = (p.stiffness, p.damping, p.bone_stiffness, p.bone_damping);
-        for s in 0..substeps {
-            let u = s as f32 / substeps as f32;
-            let tf: Vec<Affine3A> = s0
-                .iter()
-                .zip(&s1)
-                .map(|(&(q0, t0), &(q1, t1))| {
-                    let q = if q0.dot(q1) < 0.0 { -q1 } else { q1 };
-                    Affine3A::from_rotation_translation(q0.slerp(q, u), t0.lerp(t1, u))
-                })
-                .collect();
-            let corotated = self.params.spring == Spring::Corotated;
-            let kv = self.params.volume_stiffness;
-            if corotated || kv > 0.0 {
-                // Pass 0: each particle's rotation (one round from the last one) and
-                // its neighbourhood's volume change J = det(A B⁻¹).
-                let (x, rest, st, nb, rot, binv) = (
-                    &self.xa,
-                    &self.rest_off,
-                    &self.start,
-                    &self.nbr,
-                    &self.rot,
-                    &self.rest_inv,
-                );
-                self.rot_new
-                    .par_chunks_mut(CHUNK)
-                    .zip(self.jac.par_chunks_mut(CHUNK))
-                    .zip(self.half_rot.par_chunks_mut(CHUNK))
-                    .enumerate()
-                    .for_each(|(c, ((out, jac), hr))| {
-                        for k in 0..out.len() {
-                            let i = c * CHUNK + k;
-                            let r = st[i] as usize..st[i + 1] as usize;
-                            let a = neighbourhood(x, &nb[r.clone()], &rest[r], i);
-                            if corotated {
-                                out[k] = extract_rotation(&a, rot[i], 1);
-                                hr[k] = Mat3A::from_quat(out[k]) * 0.5;
-                            }
-                            // det(A B⁻¹) as det A / det B: exactly 1 at rest; bounded
-                            // (JAC_RANGE), as a neighbourhood nearly flat at rest gives
-                            // wild ratios from small moves.
-                            jac[k] = match binv[i] {
-                                Some(b) => (a.determinant() / b).clamp(JAC_RANGE.0, JAC_RANGE.1),
-                                None => 1.0,
-                            };
-                        }
-                    });
+        let (ks, cs) = (p.stiffness, p.damping);
+        let (hrot, jac) = (&self.half_rot, &self.jac);
+        let (x, ve) = (&self.xa, &self.ve);
+        let (st, nb, rl, ro, up, ps) = (
+            &self.start,
+            &self.nbr,
+            &self.rest_len,
+            &self.rest_off,
+            &self.upper,
+            &self.pair_start,
+        );
+        let n = x.len();
+        let mut parts = Vec::with_capacity(n.div_ceil(CHUNK));
+        let mut tail: &mut [Vec3A] = &mut self.pair_f;
+        for lo in (0..n).step_by(CHUNK) {
+            let hi = (lo + CHUNK).min(n);
+            let (a, b) = std::mem::take(&mut tail).split_at_mut((ps[hi] - ps[lo]) as usize);
+            parts.push(a);
+            tail = b;
+        }
+        let hkv = 0.5 * kv;
+        parts.into_par_iter().enumerate().for_each(|(c, out)| {
+            let lo = c * CHUNK;
+            let mut o = out.iter_mut();
+            for i in lo..(lo + CHUNK).min(n) {
+                let xi = x[i];
+                let vi = ve[i];
+                let edges = up[i] as usize..st[i + 1] as usize;
+                // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
+                let pi = hkv * jac[i];
                 if corotated {
-                    std::mem::swap(&mut self.rot, &mut self.rot_new);
+                    let hri = hrot[i];
+                    let slots = o.by_ref().take(edges.len());
+                    for ((f, &j), &r) in slots.zip(&nb[edges.clone()]).zip(&ro[edges]) {
+                        let j = j as usize;
+                        let dx = x[j] - xi;
+                        let d2 = dx.length_squared();
+                        if d2 <= 0.0 {
+                            *f = Vec3A::ZERO;
+                            continue;
+                        }
+                        let nrm = dx * d2.sqrt().recip();
+                        // ½(R_i + R_j) (X_j − X_i).
+                        let off = (hri + hrot[j]) * r;
+                        let p = (pi + hkv * jac[j]) - kv;
+                        *f = ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(nrm)) * nrm;
+                    }
+                } else {
+                    for e in edges {
+                        let f = o.next().expect("pair slot");
+                        let j = nb[e] as usize;
+                        let dx = x[j] - xi;
+                        let d = dx.length();
+                        if d <= 0.0 {
+                            *f = Vec3A::ZERO;
+                            continue;
+                        }
+                        let nrm = dx / d;
+                        let p = (pi + hkv * jac[j]) - kv;
+                        let s = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(nrm);
+                        *f = s * nrm + p * dx;
+                    }
                 }
             }
-            // Pass 1: each pair's force from x_n and the estimated v_n, once, from its lower
-            // end (the pair's term is exactly antisymmetric: negating both offsets negates
-            // every product, and the pressure's J̄ is summed symmetrically).
-            {
-                let (hrot, jac) = (&self.half_rot, &self.jac);
-                let (x, ve) = (&self.xa, &self.ve);
-                let (st, nb, rl, ro, up, ps) = (
-                    &self.start,
-                    &self.nbr,
-                    &self.rest_len,
-                    &self.rest_off,
-                    &self.upper,
-                    &self.pair_start,
-                );
-                let n = x.len();
-                let mut parts = Vec::with_capacity(n.div_ceil(CHUNK));
-                let mut tail: &mut [Vec3A] = &mut self.pair_f;
-                for lo in (0..n).step_by(CHUNK) {
-                    let hi = (lo + CHUNK).min(n);
-                    let (a, b) = std::mem::take(&mut tail).split_at_mut((ps[hi] - ps[lo]) as usize);
-                    parts.push(a);
-                    tail = b;
+        });
+    }
+
+    /// Pass 2 of a substep: each particle gathers its pairs' forces (list order) and its
+    /// bone's, then the leap-frog update toward the bones at `tf_next` (the substep's end).
+    /// `first`: the bones at the substep's start on the frame's first substep (after it, the
+    /// last substep's end targets, the same transform bit for bit). Returns the lowest
+    /// particle past the deviation limit, with its deviation.
+    fn integrate(
+        &mut self,
+        first: Option<&[Affine3A]>,
+        tf_next: &[Affine3A],
+        h: f32,
+    ) -> Option<(usize, f32)> {
+        let (kb, cb) = (self.params.bone_stiffness, self.params.bone_damping);
+        let limit = self.deviation_limit;
+        let (rest, bone) = (&self.rest, &self.bone);
+        let (st, wt, po, pf) = (&self.start, &self.weight, &self.pair_of, &self.pair_f);
+        self.xa
+            .par_chunks_mut(CHUNK)
+            .zip(self.v.par_chunks_mut(CHUNK))
+            .zip(self.ve.par_chunks_mut(CHUNK))
+            .zip(self.target.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, (((xs, vs), ves), tg))| {
+                let mut bad = None;
+                for k in 0..xs.len() {
+                    let i = c * CHUNK + k;
+                    let xi = xs[k];
+                    let mut acc = Vec3A::ZERO;
+                    let edges = st[i] as usize..st[i + 1] as usize;
+                    for (&w, &p) in wt[edges.clone()].iter().zip(&po[edges]) {
+                        // ±w f: the sign (j < i) is in the weight, exactly.
+                        acc += w * pf[p as usize];
+                    }
+                    let target = match first {
+                        Some(tf) => tf[bone[i] as usize].transform_point3a(rest[i].into()),
+                        None => tg[k],
+                    };
+                    let an = acc + (kb * (target - xi) - cb * ves[k]);
+                    vs[k] += h * an;
+                    xs[k] += h * vs[k];
+                    ves[k] = vs[k] + (0.5 * h) * an;
+                    tg[k] = tf_next[bone[i] as usize].transform_point3a(rest[i].into());
+                    if bad.is_none() {
+                        let dev = xs[k].distance(tg[k]);
+                        if dev.is_nan() || dev > limit || !vs[k].is_finite() {
+                            bad = Some((i, dev));
+                        }
+                    }
                 }
-                let hkv = 0.5 * kv;
-                parts.into_par_iter().enumerate().for_each(|(c, out)| {
-                    let lo = c * CHUNK;
-                    let mut o = out.iter_mut();
-                    for i in lo..(lo + CHUNK).min(n) {
-                        let xi = x[i];
-                        let vi = ve[i];
-                        let edges = up[i] as usize..st[i + 1] as usize;
-                        // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
-                        let pi = hkv * jac[i];
-                        if corotated {
-                            let hri = hrot[i];
-                            let slots = o.by_ref().take(edges.len());
-                            for ((f, &j), &r) in slots.zip(&nb[edges.clone()]).zip(&ro[edges]) {
-                                let j = j as usize;
-                                let dx = x[j] - xi;
-                                let d2 = dx.length_squared();
-                                if d2 <= 0.0 {
-                                    *f = Vec3A::ZERO;
-                                    continue;
-                                }
-                                let nrm = dx * d2.sqrt().recip();
-                                // ½(R_i + R_j) (X_j − X_i).
-                                let off = (hri + hrot[j]) * r;
-                                let p = (pi + hkv * jac[j]) - kv;
-                                *f = ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(nrm)) * nrm;
-                            }
-                        } else {
-                            for e in edges {
-                                let f = o.next().expect("pair slot");
-                                let j = nb[e] as usize;
-                                let dx = x[j] - xi;
-                                let d = dx.length();
-                                if d <= 0.0 {
-                                    *f = Vec3A::ZERO;
-                                    continue;
-                                }
-                                let nrm = dx / d;
-                                let p = (pi + hkv * jac[j]) - kv;
-                                let s = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(nrm);
-                                *f = s * nrm + p * dx;
-                            }
-                        }
-                    }
-                });
-            }
-            // Pass 2: each particle gathers its pairs' forces (list order) and its bone's,
-            // then the leap-frog update and the blow-up check (lowest failing index).
-            let limit = self.deviation_limit;
-            let tf_next: Vec<Affine3A> = s0
-                .iter()
-                .zip(&s1)
-                .map(|(&(q0, t0), &(q1, t1))| {
-                    let u = (s + 1) as f32 / substeps as f32;
-                    let q = if q0.dot(q1) < 0.0 { -q1 } else { q1 };
-                    Affine3A::from_rotation_translation(q0.slerp(q, u), t0.lerp(t1, u))
-                })
-                .collect();
-            let (rest, bone) = (&self.rest, &self.bone);
-            let (st, wt, po, pf) = (&self.start, &self.weight, &self.pair_of, &self.pair_f);
-            let failed = self
-                .xa
-                .par_chunks_mut(CHUNK)
-                .zip(self.v.par_chunks_mut(CHUNK))
-                .zip(self.ve.par_chunks_mut(CHUNK))
-                .zip(self.target.par_chunks_mut(CHUNK))
-                .enumerate()
-                .map(|(c, (((xs, vs), ves), tg))| {
-                    let mut bad = None;
-                    for k in 0..xs.len() {
-                        let i = c * CHUNK + k;
-                        let xi = xs[k];
-                        let mut acc = Vec3A::ZERO;
-                        let edges = st[i] as usize..st[i + 1] as usize;
-                        for (&w, &p) in wt[edges.clone()].iter().zip(&po[edges]) {
-                            // ±w f: the sign (j < i) is in the weight, exactly.
-                            acc += w * pf[p as usize];
-                        }
-                        // The substep's start target: the last substep's end target (the
-                        // same transform, bit for bit) after the first.
-                        let target = if s == 0 {
-                            tf[bone[i] as usize].transform_point3a(rest[i].into())
-                        } else {
-                            tg[k]
-                        };
-                        let an = acc + (kb * (target - xi) - cb * ves[k]);
-                        vs[k] += h * an;
-                        xs[k] += h * vs[k];
-                        ves[k] = vs[k] + (0.5 * h) * an;
-                        tg[k] = tf_next[bone[i] as usize].transform_point3a(rest[i].into());
-                        if bad.is_none() {
-                            let dev = xs[k].distance(tg[k]);
-                            if dev.is_nan() || dev > limit || !vs[k].is_finite() {
-                                bad = Some((i, dev));
-                            }
-                        }
-                    }
-                    bad
-                })
-                .reduce(|| None, |l, r| l.or(r));
-            if let Some((i, dev)) = failed {
-                return Err(Error::Numerical {
-                    node: self.node.clone(),
-                    frame,
-                    message: format!(
-                        "particle skinning blew up: particle {i} (bone {}) is {dev} m from its \
-                         bone's target after substep {} of {substeps} (substep {h} s), past the \
-                         limit {limit} m",
-                        self.bone[i],
-                        s + 1
-                    ),
-                    hint: format!(
-                        "raise substeps (now {substeps}) or lower stiffness / damping / \
-                         bone_stiffness if the time step is past the stable limit; if more \
-                         substeps fail at the same frame, the bones move faster than the \
-                         particles follow them: slow the pose or raise bone_stiffness"
-                    ),
-                });
-            }
+                bad
+            })
+            .reduce(|| None, |l, r| l.or(r))
+    }
+
+    /// The error of particle `i`, `dev` m from its bone's target after substep `substep`.
+    fn blow_up(&self, frame: u32, i: usize, dev: f32, substep: u32, h: f32) -> Error {
+        let (substeps, limit) = (self.params.substeps, self.deviation_limit);
+        Error::Numerical {
+            node: self.node.clone(),
+            frame,
+            message: format!(
+                "particle skinning blew up: particle {i} (bone {}) is {dev} m from its \
+                 bone's target after substep {substep} of {substeps} (substep {h} s), past \
+                 the limit {limit} m",
+                self.bone[i],
+            ),
+            hint: format!(
+                "raise substeps (now {substeps}) or lower stiffness / damping / \
+                 bone_stiffness if the time step is past the stable limit; if more \
+                 substeps fail at the same frame, the bones move faster than the \
+                 particles follow them: slow the pose or raise bone_stiffness"
+            ),
         }
-        self.bone_rot = s1.iter().map(|&(q, _)| q).collect();
-        for (d, &p) in self.x.iter_mut().zip(&self.xa) {
-            *d = p.into();
-        }
-        // Frame metrics, gathered in particle order.
+    }
+
+    /// The frame's figures, gathered in particle order, against the bones at `s1` (the
+    /// frame's end).
+    fn frame_metrics(&self, s1: &[(Quat, Vec3)], h: f32) -> ParticleFrameMetrics {
         let end_tf: Vec<Affine3A> = s1
             .iter()
             .map(|&(q, t)| Affine3A::from_rotation_translation(q, t))
             .collect();
         let mut m = ParticleFrameMetrics {
-            substeps,
+            substeps: self.params.substeps,
             dt: h,
             ..Default::default()
         };
@@ -819,7 +840,7 @@ impl ParticleSkin {
             let t = end_tf[self.bone[i] as usize].transform_point3(self.rest[i]);
             m.max_deviation = m.max_deviation.max(self.x[i].distance(t));
         }
-        Ok(m)
+        m
     }
 
     /// Posed vertex positions, in the rest mesh's order.
@@ -996,6 +1017,18 @@ impl ParticleSkin {
 /// is as before; beyond, it stays bounded. The GPU kernel clamps alike
 /// (shaders/skin/particles.wgsl).
 pub(crate) const JAC_RANGE: (f32, f32) = (0.0, 2.0);
+
+/// The bones' rigid transforms a fraction `u` of the way from `s0` to `s1` (rotation and
+/// translation each): slerp on the shorter arc, lerp.
+fn bone_poses(s0: &[(Quat, Vec3)], s1: &[(Quat, Vec3)], u: f32) -> Vec<Affine3A> {
+    s0.iter()
+        .zip(s1)
+        .map(|(&(q0, t0), &(q1, t1))| {
+            let q = if q0.dot(q1) < 0.0 { -q1 } else { q1 };
+            Affine3A::from_rotation_translation(q0.slerp(q, u), t0.lerp(t1, u))
+        })
+        .collect()
+}
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
 /// into current ones.
