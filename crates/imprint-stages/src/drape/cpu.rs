@@ -183,20 +183,25 @@ pub fn drape_cached(
     report
 }
 
-/// [`drape_cpu`] with the depth maps from any rasteriser with the signature of
-/// `imprint_core::raster::rasterize_depth_with` (the GPU one is a closure over its context);
-/// the pushes and the inside test run on the CPU. Nothing is kept between calls.
+/// A depth rasteriser with the signature of `imprint_core::raster::rasterize_depth_with`
+/// (the GPU one is a closure over its context).
+pub trait Rasterize:
+    FnMut(&Mesh, &imprint_core::camera::Camera, u32, u32, &RasterOptions) -> Result<DepthMap>
+{
+}
+
+impl<F> Rasterize for F where
+    F: FnMut(&Mesh, &imprint_core::camera::Camera, u32, u32, &RasterOptions) -> Result<DepthMap>
+{
+}
+
+/// [`drape_cpu`] with the depth maps from any [`Rasterize`]r; the pushes and the inside test
+/// run on the CPU. Nothing is kept between calls.
 pub fn drape_with(
     body: &Mesh,
     garment: &mut [Vec3],
     params: &DrapeParams,
-    rasterize: impl FnMut(
-        &Mesh,
-        &imprint_core::camera::Camera,
-        u32,
-        u32,
-        &RasterOptions,
-    ) -> Result<DepthMap>,
+    rasterize: impl Rasterize,
 ) -> Result<DrapeReport> {
     params.validate()?;
     if garment.is_empty() || body.triangles.is_empty() || body.bounds().is_empty() {
@@ -207,17 +212,7 @@ pub fn drape_with(
 }
 
 /// The maps of a body with triangles and a non-empty box, and its inside test.
-fn prepare(
-    body: &Mesh,
-    params: &DrapeParams,
-    mut rasterize: impl FnMut(
-        &Mesh,
-        &imprint_core::camera::Camera,
-        u32,
-        u32,
-        &RasterOptions,
-    ) -> Result<DepthMap>,
-) -> Result<Prepared> {
+fn prepare(body: &Mesh, params: &DrapeParams, mut rasterize: impl Rasterize) -> Result<Prepared> {
     let bounds = body.bounds();
     let res = params.resolution;
     // The inside test is built while the maps are rendered: its three axes do not share two

@@ -86,6 +86,8 @@ pub mod params;
 
 pub use body::{DepthBody, DepthBodyState};
 pub use collider::{DepthCamera, DepthCollider, DepthColliderParams, DepthPose};
-pub use cpu::{BodyCache, DrapeReport, Push, body_field, drape_cached, drape_cpu, drape_with};
+pub use cpu::{
+    BodyCache, DrapeReport, Push, Rasterize, body_field, drape_cached, drape_cpu, drape_with,
+};
 pub use inside::InsideTest;
 pub use params::{DrapeParams, Fallback};
