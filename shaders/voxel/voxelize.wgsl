@@ -71,12 +71,13 @@ fn touch(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups)
                 let centre = vec3<f32>(f32(i), f32(j), f32(k));
                 let d = closest_point_on_triangle(centre, a, b, c) - centre;
                 let d2 = dot3(d, d);
-                // Beyond the circumscribed sphere: no contact. Inside the inscribed one:
-                // contact. In between: the exact test. (The CPU's order of decisions.)
+                // Beyond the circumscribed sphere: no contact. Inside the inscribed one, or
+                // the closest point inside the box: contact. Otherwise: the exact test. (The
+                // CPU's order of decisions.)
                 if d2 > params.outer2 {
                     continue;
                 }
-                if d2 > 0.25 && !triangle_box_overlap(centre, half, a, b, c) {
+                if d2 > 0.25 && !all(abs(d) <= half) && !triangle_box_overlap(centre, half, a, b, c) {
                     continue;
                 }
                 let bits = bitcast<u32>(d2);
