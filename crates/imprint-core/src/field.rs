@@ -2,11 +2,12 @@
 //! distance field built from it.
 
 use crate::GridSpec;
+use crate::closest::Batch;
 use glam::{UVec3, Vec3, Vec4};
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Which point stands for a surface cell.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -35,6 +36,22 @@ pub struct Boundary {
     /// is closed; `None` for an open mesh, whose inside is undefined: its field is unsigned.
     #[serde(default)]
     pub inside: Option<Vec<u32>>,
+}
+
+/// The cells of a row of `nearest` from its first to its last band cell (None: all far).
+/// Eight cells at a time, a test that vectorises.
+pub fn band_span(row: &[u32]) -> Option<std::ops::Range<usize>> {
+    let far8 = |c: &[u32]| {
+        c.iter()
+            .fold(true, |all, &n| all & (n == DistanceField::FAR))
+    };
+    let chunks = row.len().div_ceil(8);
+    let chunk = |j: usize| &row[j * 8..(j * 8 + 8).min(row.len())];
+    let first = (0..chunks).find(|&j| !far8(chunk(j)))?;
+    let last = (first..chunks).rev().find(|&j| !far8(chunk(j)))?;
+    let lo = first * 8 + chunk(first).iter().position(|&n| n != DistanceField::FAR)?;
+    let hi = last * 8 + chunk(last).iter().rposition(|&n| n != DistanceField::FAR)?;
+    Some(lo..hi + 1)
 }
 
 /// Bit `i` of a bitset stored as 32-bit words (bit `i % 32` of word `i / 32`).
@@ -107,7 +124,34 @@ pub struct DistanceField {
 /// The per-cell vectors of a [`DistanceField`], computed on first use (see
 /// [`DistanceField::cells`]). A clone starts empty again: the clone may be changed.
 #[derive(Default)]
-pub struct LazyCells(OnceLock<Vec<Vec4>>);
+pub struct LazyCells {
+    cells: OnceLock<Vec<Vec4>>,
+    /// A buffer of the same grid whose cells are all far, to compute into.
+    spare: Mutex<Option<SpareCells>>,
+    /// Every far cell's distance is exactly the far value (a built field), so the cells can
+    /// go back as a spare once their band cells are reset.
+    far_exact: bool,
+}
+
+/// A [`DistanceField::cells`] buffer in which every cell is far, `(0, 0, 0, -far)`: a field
+/// of the same grid and band computed into it writes only its band cells. A 128³ buffer is
+/// 32 MiB; a fresh one costs page faults on every frame of a moving body.
+pub struct SpareCells {
+    buf: Vec<Vec4>,
+    far: f32,
+}
+
+impl LazyCells {
+    /// The cache of a field built by the field stage (far cells hold exactly the far value),
+    /// computed into `spare` when one is given.
+    pub fn built(spare: Option<SpareCells>) -> Self {
+        LazyCells {
+            cells: OnceLock::new(),
+            spare: Mutex::new(spare),
+            far_exact: true,
+        }
+    }
+}
 
 impl Clone for LazyCells {
     fn clone(&self) -> Self {
@@ -117,7 +161,7 @@ impl Clone for LazyCells {
 
 impl std::fmt::Debug for LazyCells {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0.get() {
+        match self.cells.get() {
             Some(c) => write!(f, "LazyCells({} computed)", c.len()),
             None => f.write_str("LazyCells(not computed)"),
         }
@@ -162,31 +206,86 @@ impl DistanceField {
     /// binds: a vector costs one load instead of a closest-point query (on a triangle, for a
     /// `Closest` field). Computed in parallel on first use and kept, so a field read by many
     /// substeps, frames or consumers pays once. Change no cell of a field after calling it.
+    ///
+    /// The triangles' closest points go eight at a time ([`Batch`], the scalar function's
+    /// bits); given a spare buffer ([`LazyCells::built`]), only the rows' band spans are
+    /// written. Either way the cells are the same bits.
     pub fn cells(&self) -> &[Vec4] {
-        self.cells.0.get_or_init(|| {
+        self.cells.cells.get_or_init(|| {
             let spec = &self.spec;
+            let far = self.far_value();
+            let spare = self
+                .cells
+                .spare
+                .lock()
+                .map(|mut s| s.take())
+                .unwrap_or(None);
+            let spare = spare.filter(|s| s.buf.len() == spec.len() && s.far == far);
+            let (mut out, fresh) = match spare {
+                Some(s) => (s.buf, false),
+                None => (vec![Vec4::ZERO; spec.len()], true),
+            };
             let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
-            let mut out = vec![Vec4::ZERO; spec.len()];
             out.par_chunks_mut(nx * ny)
                 .enumerate()
-                .for_each(|(z, plane)| {
-                    for y in 0..ny {
-                        for x in 0..nx {
-                            let c = UVec3::new(x as u32, y as u32, z as u32);
-                            let i = spec.index(c);
-                            plane[y * nx + x] = match self.nearest[i] {
-                                Self::FAR => Vec4::new(0.0, 0.0, 0.0, -self.dist[i]),
-                                n => {
-                                    let centre = spec.center(c);
-                                    (self.closest_point(n as usize, centre) - centre)
-                                        .extend(self.dist[i])
-                                }
-                            };
-                        }
-                    }
-                });
+                .for_each(|(z, plane)| self.plane_cells(z, plane, fresh));
             out
         })
+    }
+
+    /// The cells of plane `z` ([`DistanceField::cells`]): every row whole when `fresh`, else
+    /// only its band span (the rest already far).
+    fn plane_cells(&self, z: usize, plane: &mut [Vec4], fresh: bool) {
+        let spec = &self.spec;
+        let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
+        let base = z * nx * ny;
+        let centre = |k: usize| spec.center(UVec3::new((k % nx) as u32, (k / nx) as u32, z as u32));
+        let mut batch = Batch::<u32>::default();
+        for y in 0..ny {
+            let row = y * nx;
+            let near = &self.nearest[base + row..base + row + nx];
+            let span = if fresh { Some(0..nx) } else { band_span(near) };
+            for k in span.into_iter().flatten().map(|x| row + x) {
+                let d = self.dist[base + k];
+                match (near[k - row], &self.faces) {
+                    (Self::FAR, _) => plane[k] = Vec4::new(0.0, 0.0, 0.0, -d),
+                    (n, Some(faces)) => {
+                        if batch.push(centre(k), faces[n as usize], k as u32) {
+                            batch.run(|k, q, _| {
+                                let k = k as usize;
+                                plane[k] = (q - centre(k)).extend(self.dist[base + k]);
+                            });
+                        }
+                    }
+                    (n, None) => plane[k] = (self.points[n as usize] - centre(k)).extend(d),
+                }
+            }
+        }
+        batch.run(|k, q, _| {
+            let k = k as usize;
+            plane[k] = (q - centre(k)).extend(self.dist[base + k]);
+        });
+    }
+
+    /// Takes the computed cells back as a [`SpareCells`] (their band cells reset to far), for
+    /// the next field of the same grid and band; None unless computed and built.
+    pub fn take_spare_cells(&mut self) -> Option<SpareCells> {
+        if !self.cells.far_exact {
+            return None;
+        }
+        let mut buf = self.cells.cells.take()?;
+        let far = self.far_value();
+        let (nx, ny) = (self.spec.dims.x as usize, self.spec.dims.y as usize);
+        buf.par_chunks_mut(nx * ny)
+            .zip(self.nearest.par_chunks(nx * ny))
+            .for_each(|(plane, near)| {
+                for (cells, near) in plane.chunks_mut(nx).zip(near.chunks(nx)) {
+                    if let Some(span) = band_span(near) {
+                        cells[span].fill(Vec4::new(0.0, 0.0, 0.0, -far));
+                    }
+                }
+            });
+        Some(SpareCells { buf, far })
     }
 
     /// The linear blend of two fields of the same grid and band at weight `s` (0: `a`, 1:

@@ -15,10 +15,11 @@
 //!
 //! Speed: the splat's rows are written eight cells at a time (AVX2 where the CPU has it), and
 //! the refinement evaluates its (cell, triangle) pairs eight at a time
-//! ([`crate::voxel::batch`]); both give the scalar code's bits, so the field is the same.
+//! ([`imprint_core::closest`]); both give the scalar code's bits, so the field is the same.
 
-use crate::voxel::batch::Batch;
 use glam::Vec3;
+use imprint_core::closest::Batch;
+use imprint_core::field::{LazyCells, SpareCells, band_span};
 use imprint_core::geom::{ceil_i, floor_i};
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
@@ -39,11 +40,15 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
 pub struct FieldBuilder {
     spare: Vec<Vec<u32>>,
     spare_dist: Option<Vec<f32>>,
+    /// The last recycled field's per-cell vectors, reset to far: the next field computes
+    /// its own into them.
+    spare_cells: Option<SpareCells>,
 }
 
 impl FieldBuilder {
     /// Takes back a field nobody else holds, for its buffers.
-    pub fn recycle(&mut self, field: DistanceField) {
+    pub fn recycle(&mut self, mut field: DistanceField) {
+        self.spare_cells = field.take_spare_cells().or(self.spare_cells.take());
         self.spare_dist = Some(field.dist);
         self.spare.push(field.nearest);
     }
@@ -248,7 +253,7 @@ impl FieldBuild {
             points: Arc::new(self.points),
             faces: self.world_faces.map(Arc::new),
             inside: self.inside.map(Arc::new),
-            cells: Default::default(),
+            cells: LazyCells::built(builder.spare_cells.take()),
         }
     }
 }
@@ -357,22 +362,6 @@ fn refine_to_faces(
                 }
             }
         });
-}
-
-/// The cells of a row from its first to its last band cell (None: all far). Eight cells at
-/// a time, a test that vectorises.
-fn band_span(row: &[u32]) -> Option<std::ops::Range<usize>> {
-    let far8 = |c: &[u32]| {
-        c.iter()
-            .fold(true, |all, &n| all & (n == DistanceField::FAR))
-    };
-    let chunks = row.len().div_ceil(8);
-    let chunk = |j: usize| &row[j * 8..(j * 8 + 8).min(row.len())];
-    let first = (0..chunks).find(|&j| !far8(chunk(j)))?;
-    let last = (first..chunks).rev().find(|&j| !far8(chunk(j)))?;
-    let lo = first * 8 + chunk(first).iter().position(|&n| n != DistanceField::FAR)?;
-    let hi = last * 8 + chunk(last).iter().rposition(|&n| n != DistanceField::FAR)?;
-    Some(lo..hi + 1)
 }
 
 /// What [`splat_slab`] needs of a slab of layers `z0..z1` and the band.

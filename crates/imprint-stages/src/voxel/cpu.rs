@@ -8,14 +8,14 @@
 //! the smallest, which does not depend on the order the pairs arrive in. A slab's keys
 //! (128² cells × 4 layers × 8 bytes = 512 KiB at 128³) stay in cache while it is worked on;
 //! one shared array updated with atomic minima missed the cache on nearly every proposal. The
-//! closest points are computed eight pairs at a time ([`super::batch`], the scalar function's
+//! closest points are computed eight pairs at a time ([`imprint_core::closest`], the scalar function's
 //! bits). The same task then lists its surface cells in increasing index from its occupancy
 //! bits and resets what it touched, so a `Voxelizer` kept across frames costs time in
 //! proportion to the surface, not the grid, and the slabs' lists concatenate in index order.
 
-use super::batch::Batch;
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
+use imprint_core::closest::Batch;
 use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;

@@ -6,7 +6,6 @@
 //! by default, the closest point of the touching triangles to its centre (sub-voxel accurate).
 //! Only surface positions are used, so open, flipped, duplicated or unwelded meshes all work.
 
-pub mod batch;
 pub mod cpu;
 pub mod gpu;
 pub mod solid;

@@ -1,16 +1,16 @@
 //! Closest points on triangles, [`LANES`] (point, triangle) pairs at a time, bit for bit the
 //! results of [`closest_point_on_triangle`] followed by `(q - p).length_squared()`.
 //!
-//! Both the voxeliser (a triangle against its candidate cells) and the field's refinement
-//! (a cell against its candidate triangles) spend most of their time there, and the scalar
-//! function's region branches mispredict on nearly every call. Here every lane computes all
+//! The voxeliser (a triangle against its candidate cells), the field's refinement (a cell
+//! against its candidate triangles) and the field's per-cell vectors spend most of their time
+//! there, and the scalar function's region branches mispredict on nearly every call. Here every lane computes all
 //! of Ericson's regions with the same operations in the same order (Rust never fuses or
 //! reorders float operations) and selects the first that applies, as the scalar `return`s
 //! do, so the loop over lanes vectorises and the results keep their bits. The rare collinear
 //! triangle that reaches the scalar fallback is redone by the scalar function.
 
+use crate::geom::closest_point_on_triangle;
 use glam::Vec3;
-use imprint_core::geom::closest_point_on_triangle;
 
 /// Pairs per batch: two SSE registers, one AVX register.
 pub const LANES: usize = 8;
