@@ -19,6 +19,7 @@ use imprint_core::closest::Batch;
 use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
+use std::sync::Mutex;
 
 /// Half-size of the closed cell box in the overlap test: a hair over 0.5 so that a triangle
 /// lying exactly on a cell face marks both cells even after rounding.
@@ -33,15 +34,30 @@ type BoundaryPart = (Vec<u32>, Vec<Vec3>, Vec<[Vec3; 3]>);
 /// Voxelises meshes onto one grid, keeping its scratch arrays between calls.
 pub struct Voxelizer {
     spec: GridSpec,
-    /// Per cell: (d² bits << 32 | triangle), EMPTY when no triangle touches it.
-    best: Vec<u64>,
-    /// One bit per cell of each slab, `slab_words` words a slab: touched by some triangle.
-    occupied: Vec<u64>,
-    slab_words: usize,
+    /// Scratch for the slabs being worked on (one per task running at once, made on demand),
+    /// given back clean: a one-shot run allocates a few slabs' worth, not the grid's.
+    pool: Mutex<Vec<SlabScratch>>,
     /// Mark the cells inside a closed mesh ([`Boundary::inside`]: the field's sign); on by
     /// default, off where nothing reads the sign.
     pub signed: bool,
     closed: ClosedCache,
+}
+
+/// One slab's keys, (d² bits << 32 | triangle) per cell, EMPTY where no triangle touches it,
+/// and a bit per cell that some triangle touches; clean (all EMPTY, all 0) between uses.
+struct SlabScratch {
+    best: Vec<u64>,
+    occupied: Vec<u64>,
+}
+
+impl SlabScratch {
+    fn new(nxy: usize) -> Self {
+        let cells = nxy * SLAB_LAYERS;
+        SlabScratch {
+            best: vec![EMPTY; cells],
+            occupied: vec![0; cells.div_ceil(64)],
+        }
+    }
 }
 
 /// What a slab task reads: the grid and the mesh in grid units.
@@ -55,14 +71,9 @@ struct Scene<'a> {
 impl Voxelizer {
     pub fn new(spec: GridSpec) -> Result<Self> {
         spec.check_memory("voxelisation scratch", 9)?;
-        let slab_cells = spec.dims.x as usize * spec.dims.y as usize * SLAB_LAYERS;
-        let slab_words = slab_cells.div_ceil(64);
-        let slabs = (spec.dims.z as usize).div_ceil(SLAB_LAYERS);
         Ok(Voxelizer {
             spec,
-            best: vec![EMPTY; spec.len()],
-            occupied: vec![0; slabs * slab_words],
-            slab_words,
+            pool: Mutex::new(Vec::new()),
             signed: true,
             closed: ClosedCache::default(),
         })
@@ -89,16 +100,27 @@ impl Voxelizer {
             mesh,
             variant,
         };
-        let parts: Vec<BoundaryPart> = self
-            .best
-            .par_chunks_mut(nxy * SLAB_LAYERS)
-            .zip(self.occupied.par_chunks_mut(self.slab_words))
-            .enumerate()
-            .map(|(slab, (best, occupied))| {
-                let z0 = slab * SLAB_LAYERS;
-                let z1 = z0 + best.len() / nxy;
-                propose_slab(&scene, bins.of(slab), z0..z1, best, occupied);
-                collect_slab(&scene, z0 * nxy, best, occupied)
+        let nz = spec.dims.z as usize;
+        let pool = &self.pool;
+        let parts: Vec<BoundaryPart> = (0..nz.div_ceil(SLAB_LAYERS))
+            .into_par_iter()
+            .map(|slab| {
+                let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
+                let taken = pool.lock().ok().and_then(|mut p| p.pop());
+                let mut scratch = taken.unwrap_or_else(|| SlabScratch::new(nxy));
+                let best = &mut scratch.best[..z.len() * nxy];
+                propose_slab(
+                    &scene,
+                    bins.of(slab),
+                    z.clone(),
+                    best,
+                    &mut scratch.occupied,
+                );
+                let part = collect_slab(&scene, z.start * nxy, best, &mut scratch.occupied);
+                if let Ok(mut p) = pool.lock() {
+                    p.push(scratch);
+                }
+                part
             })
             .collect();
         let total = parts.iter().map(|p| p.0.len()).sum();
