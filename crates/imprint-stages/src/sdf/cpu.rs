@@ -53,13 +53,17 @@ impl FieldBuilder {
         self.spare.push(field.nearest);
     }
 
+    /// A grid-sized buffer whose contents do not matter: every cell is written by the build
+    /// (the splat fills its layers before splatting, the refinement writes every cell) before
+    /// it is read. A fresh one is zeroed lazily by the system (no single-threaded pass over
+    /// 8 MiB first; the pages are touched by the build's parallel fills).
     fn buffer_u32(&mut self, n: usize) -> Vec<u32> {
         match self.spare.pop() {
             Some(mut v) => {
                 v.resize(n, DistanceField::FAR);
                 v
             }
-            None => vec![DistanceField::FAR; n],
+            None => vec![0; n],
         }
     }
 
@@ -94,8 +98,13 @@ impl FieldBuilder {
         } else {
             Vec::new()
         };
-        let mut dist = self.spare_dist.take().unwrap_or_default();
-        dist.resize(spec.len(), 0.0);
+        let dist = match self.spare_dist.take() {
+            Some(mut d) => {
+                d.resize(spec.len(), 0.0);
+                d
+            }
+            None => vec![0.0; spec.len()],
+        };
         let nearest = self.buffer_u32(spec.len());
         let owner = refine.then(|| self.buffer_u32(spec.len()));
         Ok(FieldBuild {
