@@ -165,6 +165,7 @@ impl Node for FieldNode {
             measured: 0,
             builds: 0,
             sched: Box::new(FieldSchedule::new(sc, self.band, ahead)),
+            held: None,
         }))
     }
     fn as_any(&self) -> &dyn Any {
@@ -204,6 +205,9 @@ struct FieldStage {
     builds: u32,
     /// Builds, parts of builds and interpolation.
     sched: Box<FieldSchedule>,
+    /// The last build's field while someone else still held it (a cloth keeps the previous
+    /// frame's field for its blend): its buffers go to the build after next.
+    held: Option<Arc<FieldValue>>,
 }
 
 impl Stage for FieldStage {
@@ -310,14 +314,23 @@ impl FieldStage {
     ) -> imprint_core::Result<(Step, Option<Published>)> {
         let sc = self.sched.schedule;
         let builds = ctx.first || (ctx.key && ctx.changed);
-        // Last frame's field, if nobody holds it any more, lends its buffers.
+        // Last build's field, if nobody holds it any more, lends its buffers; else the one
+        // before it, which a cloth has let go of by now (a fresh field's buffers cost page
+        // faults on every frame).
         if builds
             && sc.split == 1
             && let Some(Value::Field(own)) = ctx.own.take()
         {
+            let older = self.held.take();
             match FieldValue::try_take(own) {
                 Ok(f) => self.sched.builder.recycle(f),
-                Err(shared) => ctx.own = Some(Value::Field(shared)),
+                Err(shared) => {
+                    self.held = Some(shared.clone());
+                    ctx.own = Some(Value::Field(shared));
+                }
+            }
+            if let Some(Ok(f)) = older.map(FieldValue::try_take) {
+                self.sched.builder.recycle(f);
             }
         }
         let (values, gpu) = (ctx.values, ctx.gpu);
