@@ -3,11 +3,12 @@
 //!
 //! The voxeliser (a triangle against its candidate cells), the field's refinement (a cell
 //! against its candidate triangles) and the field's per-cell vectors spend most of their time
-//! there, and the scalar function's region branches mispredict on nearly every call. Here every lane computes all
-//! of Ericson's regions with the same operations in the same order (Rust never fuses or
-//! reorders float operations) and selects the first that applies, as the scalar `return`s
-//! do, so the loop over lanes vectorises and the results keep their bits. The rare collinear
-//! triangle that reaches the scalar fallback is redone by the scalar function.
+//! there, and the scalar function's region branches mispredict on nearly every call. Here
+//! every lane computes all of Ericson's regions with the same operations in the same order
+//! (Rust never fuses or reorders float operations) and selects the first that applies, as the
+//! scalar `return`s do, so the loop over lanes vectorises and the results keep their bits.
+//! The rare collinear triangle that reaches the scalar fallback is redone by the scalar
+//! function.
 
 use crate::geom::closest_point_on_triangle;
 use glam::Vec3;

@@ -240,6 +240,11 @@ impl DistanceField {
         let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
         let base = z * nx * ny;
         let centre = |k: usize| spec.center(UVec3::new((k % nx) as u32, (k / nx) as u32, z as u32));
+        // A batch's closest points, written as the cells' vectors.
+        let put = |plane: &mut [Vec4], k: u32, q: Vec3| {
+            let k = k as usize;
+            plane[k] = (q - centre(k)).extend(self.dist[base + k]);
+        };
         let mut batch = Batch::<u32>::default();
         for y in 0..ny {
             let row = y * nx;
@@ -251,20 +256,14 @@ impl DistanceField {
                     (Self::FAR, _) => plane[k] = Vec4::new(0.0, 0.0, 0.0, -d),
                     (n, Some(faces)) => {
                         if batch.push(centre(k), faces[n as usize], k as u32) {
-                            batch.run(|k, q, _| {
-                                let k = k as usize;
-                                plane[k] = (q - centre(k)).extend(self.dist[base + k]);
-                            });
+                            batch.run(|k, q, _| put(plane, k, q));
                         }
                     }
                     (n, None) => plane[k] = (self.points[n as usize] - centre(k)).extend(d),
                 }
             }
         }
-        batch.run(|k, q, _| {
-            let k = k as usize;
-            plane[k] = (q - centre(k)).extend(self.dist[base + k]);
-        });
+        batch.run(|k, q, _| put(plane, k, q));
     }
 
     /// Takes the computed cells back as a [`SpareCells`] (their band cells reset to far), for

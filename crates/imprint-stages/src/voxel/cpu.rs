@@ -2,16 +2,17 @@
 //! any thread count.
 //!
 //! The triangles are first binned by the slabs their candidate cells reach (a counting sort,
-//! so each slab sees its triangles in increasing index). A slab task then owns its layers of
-//! the per-cell key array: each (triangle, candidate cell) pair in the slab yields the key
-//! (squared distance from the cell centre to the triangle, triangle index), and the cell keeps
-//! the smallest, which does not depend on the order the pairs arrive in. A slab's keys
-//! (128² cells × 4 layers × 8 bytes = 512 KiB at 128³) stay in cache while it is worked on;
-//! one shared array updated with atomic minima missed the cache on nearly every proposal. The
-//! closest points are computed eight pairs at a time ([`imprint_core::closest`], the scalar function's
-//! bits). The same task then lists its surface cells in increasing index from its occupancy
-//! bits and resets what it touched, so a `Voxelizer` kept across frames costs time in
-//! proportion to the surface, not the grid, and the slabs' lists concatenate in index order.
+//! so each slab sees its triangles in increasing index). A slab task then takes a clean
+//! scratch of keys for its layers from the voxeliser's pool: each (triangle, candidate cell)
+//! pair in the slab yields the key (squared distance from the cell centre to the triangle,
+//! triangle index), and the cell keeps the smallest, which does not depend on the order the
+//! pairs arrive in. A slab's keys (128² cells × 4 layers × 8 bytes = 512 KiB at 128³) stay in
+//! cache while it is worked on; one shared grid-sized array updated with atomic minima missed
+//! the cache on nearly every proposal. The closest points are computed eight pairs at a time
+//! ([`imprint_core::closest`], the scalar function's bits). The same task then lists its
+//! surface cells in increasing index from its occupancy bits and resets what it touched, so a
+//! `Voxelizer` kept across frames costs time in proportion to the surface, not the grid, and
+//! the slabs' lists concatenate in index order.
 
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
@@ -70,7 +71,8 @@ struct Scene<'a> {
 
 impl Voxelizer {
     pub fn new(spec: GridSpec) -> Result<Self> {
-        spec.check_memory("voxelisation scratch", 9)?;
+        // Grid-sized: only the inside bits (the slab scratch is a few slabs' worth).
+        spec.check_memory("voxelisation inside bits", 1)?;
         Ok(Voxelizer {
             spec,
             pool: Mutex::new(Vec::new()),
