@@ -119,6 +119,11 @@ impl FieldBuilder {
             points: boundary.points.clone(),
             world_faces: refine.then(|| boundary.faces.clone()),
             inside: boundary.inside.clone(),
+            spans: if refine {
+                vec![[0, 0]; spec.len() / spec.dims.x as usize]
+            } else {
+                Vec::new()
+            },
         })
     }
 }
@@ -148,6 +153,10 @@ pub struct FieldBuild {
     /// The boundary's inside cells: the field's sign.
     #[serde(default)]
     inside: Option<Vec<u32>>,
+    /// Per row (`y + ny z`), the band span the refinement found (refinement only; empty in a
+    /// build checkpointed by a version that did not keep them): the field's cells use them.
+    #[serde(default)]
+    spans: Vec<[u32; 2]>,
 }
 
 impl FieldBuild {
@@ -233,10 +242,19 @@ impl FieldBuild {
         );
         let nxy = dims.0 * dims.1;
         let owner = self.owner.as_mut().expect("refining builds have owners");
+        let rows = z.start * dims.1..z.end * dims.1;
+        // A build loaded from a checkpoint without spans writes them nowhere.
+        let mut none = vec![[0, 0]; rows.len()];
+        let spans = if self.spans.len() == dims.1 * dims.2 {
+            &mut self.spans[rows]
+        } else {
+            &mut none
+        };
         refine_to_faces(
             &mut self.dist[z.start * nxy..z.end * nxy],
             &self.nearest,
             &mut owner[z.start * nxy..z.end * nxy],
+            spans,
             z.start * nxy,
             &self.faces,
             dims,
@@ -247,6 +265,8 @@ impl FieldBuild {
 
     /// The field (after every part ran); the splat's buffer goes back to `builder`.
     pub fn finish(self, builder: &mut FieldBuilder) -> DistanceField {
+        let rows = self.spec.len() / self.spec.dims.x as usize;
+        let spans = (self.owner.is_some() && self.spans.len() == rows).then_some(self.spans);
         let nearest = match self.owner {
             Some(owner) => {
                 builder.spare.push(self.nearest);
@@ -262,7 +282,7 @@ impl FieldBuild {
             points: Arc::new(self.points),
             faces: self.world_faces.map(Arc::new),
             inside: self.inside.map(Arc::new),
-            cells: LazyCells::built(builder.spare_cells.take()),
+            cells: LazyCells::built(builder.spare_cells.take(), spans),
         }
     }
 }
@@ -270,13 +290,15 @@ impl FieldBuild {
 /// The refinement pass: per band cell, the exact distance to the best owning triangle among
 /// its nearest point's and its six neighbours' nearest points'. Writes the new `nearest`
 /// in `owner` (the point whose triangle won; ties to the smaller index) and writes world
-/// distances. `dist` and `owner` are the layers starting at cell `offset`. The pairs go
-/// through a [`Batch`]: a minimum, so the order they are evaluated in does not matter.
+/// distances. `dist` and `owner` are the layers starting at cell `offset`, `spans` their
+/// rows' band spans (written). The pairs go through a [`Batch`]: a minimum, so the order
+/// they are evaluated in does not matter.
 #[allow(clippy::too_many_arguments)]
 fn refine_to_faces(
     dist: &mut [f32],
     nearest: &[u32],
     owner: &mut [u32],
+    spans: &mut [[u32; 2]],
     offset: usize,
     faces: &[[Vec3; 3]],
     (nx, ny, nz): (usize, usize, usize),
@@ -286,8 +308,9 @@ fn refine_to_faces(
     let nxy = nx * ny;
     dist.par_chunks_mut(nxy * SLAB_LAYERS)
         .zip(owner.par_chunks_mut(nxy * SLAB_LAYERS))
+        .zip(spans.par_chunks_mut(ny * SLAB_LAYERS))
         .enumerate()
-        .for_each(|(slab, (dist, owner))| {
+        .for_each(|(slab, ((dist, owner), row_spans))| {
             let base = offset + slab * nxy * SLAB_LAYERS;
             // (cell in the slab, candidate point) pairs, evaluated a batch at a time; `dist`
             // and `owner` hold each cell's best squared distance and point so far.
@@ -309,8 +332,10 @@ fn refine_to_faces(
                 let Some(xs) = band_span(&nearest[base + row..base + row + nx]) else {
                     dist[row..row + nx].fill(far);
                     owner[row..row + nx].fill(DistanceField::FAR);
+                    row_spans[zl * ny + y] = [0, 0];
                     continue;
                 };
+                row_spans[zl * ny + y] = [xs.start as u32, xs.end as u32];
                 dist[row..row + xs.start].fill(far);
                 owner[row..row + xs.start].fill(DistanceField::FAR);
                 dist[row + xs.end..row + nx].fill(far);

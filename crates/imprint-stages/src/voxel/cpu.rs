@@ -17,7 +17,7 @@
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
 use imprint_core::closest::Batch;
-use imprint_core::geom::{ceil_i, closest_point_on_triangle, floor_i, triangle_box_overlap};
+use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -291,6 +291,11 @@ fn collect_slab(
     let mut cells = Vec::new();
     let mut points = Vec::new();
     let mut faces = Vec::new();
+    // `Closest`: the cells' closest points a batch at a time, written in place.
+    let mut batch = Batch::<u32>::default();
+    let put = |points: &mut Vec<Vec3>, k: u32, q: Vec3| {
+        points[k as usize] = spec.origin + q * spec.cell;
+    };
     for (w, word) in occupied.iter_mut().enumerate() {
         let mut bits = std::mem::take(word);
         while bits != 0 {
@@ -300,19 +305,18 @@ fn collect_slab(
             let cell = base + local;
             let coords = spec.coords(cell);
             let tri = mesh.triangles[(key & 0xffff_ffff) as usize];
-            let point = match variant {
-                BoundaryVariant::Centre => spec.center(coords),
-                BoundaryVariant::Closest => {
-                    let [a, b, c] = tri.map(|i| verts[i as usize]);
-                    let q = closest_point_on_triangle(coords.as_vec3(), a, b, c);
-                    spec.origin + q * spec.cell
+            points.push(spec.center(coords));
+            if variant == BoundaryVariant::Closest {
+                let k = points.len() as u32 - 1;
+                if batch.push(coords.as_vec3(), tri.map(|i| verts[i as usize]), k) {
+                    batch.run(|k, q, _| put(&mut points, k, q));
                 }
-            };
+            }
             cells.push(cell as u32);
-            points.push(point);
             faces.push(tri.map(|i| mesh.positions[i as usize]));
         }
     }
+    batch.run(|k, q, _| put(&mut points, k, q));
     (cells, points, faces)
 }
 
