@@ -280,8 +280,8 @@ impl Values {
                     every,
                     weight,
                 } => FieldSnapshot::Blend {
-                    a: (**a).clone(),
-                    b: (**b).clone(),
+                    a: Box::new((**a).clone()),
+                    b: Box::new((**b).clone()),
                     a_key: *a_key,
                     every: *every,
                     weight: *weight,
@@ -349,9 +349,10 @@ pub struct ValuesSnapshot {
 #[derive(Clone, Serialize, Deserialize)]
 enum FieldSnapshot {
     One(DistanceField),
+    /// Boxed: two fields beside one (serde writes a box as what it holds).
     Blend {
-        a: DistanceField,
-        b: DistanceField,
+        a: Box<DistanceField>,
+        b: Box<DistanceField>,
         a_key: i64,
         every: u32,
         weight: f32,
@@ -369,8 +370,8 @@ impl FieldSnapshot {
                 every,
                 weight,
             } => FieldData::Blend {
-                a: Arc::new(a),
-                b: Arc::new(b),
+                a: Arc::new(*a),
+                b: Arc::new(*b),
                 a_key,
                 every,
                 weight,
