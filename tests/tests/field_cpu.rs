@@ -386,6 +386,14 @@ fn cells_in_a_recycled_buffer_are_the_cells_computed_afresh() {
         };
         let afresh = f.clone();
         assert_eq!(bits(f.cells()), bits(afresh.cells()), "step {k}");
+        // Counted in the builder's row spans, and in a copy (which has none) over every cell.
+        let far = imprint_core::DistanceField::FAR;
+        let band = f.nearest.iter().filter(|&&n| n != far).count();
+        assert_eq!(
+            (f.band_cells(), afresh.band_cells()),
+            (band, band),
+            "step {k}"
+        );
         for (i, c) in f.cells().iter().enumerate() {
             let v = f.vector(i).to_array().map(f32::to_bits);
             assert_eq!(

@@ -133,7 +133,8 @@ pub struct LazyCells {
     far_exact: bool,
     /// Per row of the grid (`y + ny z`), its band span `[lo, hi)` (`lo == hi`: all far), when
     /// the builder knew them: computing the cells and resetting them then skip a scan of
-    /// `nearest` each (8 MiB, cold, for a 128³ grid).
+    /// `nearest` each (8 MiB, cold, for a 128³ grid), and so does [`DistanceField::band_cells`].
+    /// Like the cells, they hold while no cell of the field changes (a clone has none).
     spans: Option<Vec<[u32; 2]>>,
 }
 
@@ -455,7 +456,17 @@ impl DistanceField {
 
     /// Number of cells inside the band.
     pub fn band_cells(&self) -> usize {
-        self.nearest.iter().filter(|&&n| n != Self::FAR).count()
+        let nx = self.spec.dims.x as usize;
+        let in_band = |near: &[u32]| near.iter().filter(|&&n| n != Self::FAR).count();
+        match &self.cells.spans {
+            // Only the rows' spans: a tenth of the grid's cells at a = 3 on 128³.
+            Some(spans) => (spans.iter().enumerate())
+                .map(|(row, &[lo, hi])| {
+                    in_band(&self.nearest[row * nx..][lo as usize..hi as usize])
+                })
+                .sum(),
+            None => in_band(&self.nearest),
+        }
     }
 
     /// The field at any point, by trilinear interpolation of the 8 surrounding cells.
