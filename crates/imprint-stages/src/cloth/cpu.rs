@@ -10,6 +10,7 @@
 //! the springs are also read by blocks of eight particles ([`super::lanes`]), same bits.
 
 use super::contact::{self, Collider, Hit};
+use super::contact_lanes::{self, Touch};
 use super::lanes::{Blocks, LANES, Lanes};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
@@ -995,6 +996,12 @@ fn update_chunk(
     }
     let mut samples = [None; CHUNK];
     for (c, collider) in ctx.colliders.iter().enumerate() {
+        if collider.start.is_none() && !collider.end.is_signed() {
+            for (b, out) in next.chunks_mut(LANES).enumerate() {
+                touch_block(base + b * LANES, ctx, collider, pos, out, side, c, st);
+            }
+            continue;
+        }
         for (k, sample) in samples.iter_mut().enumerate().take(next.len()) {
             let i = base + k;
             *sample = if pinned(i) {
@@ -1066,6 +1073,50 @@ fn update_chunk(
         let moved = (pos[i] - prev[i]).truncate() * ctx.ratio;
         st.kinetic += step.length_squared() as f64;
         st.max_accel = st.max_accel.max((step - moved).length_squared());
+    }
+}
+
+/// The contact of particles `first..` (`out`, at most [`LANES`]; `side` the chunk's
+/// memories) with collider `c`, an unsigned field without a blend, a block at a time
+/// ([`contact_lanes`]): the positions, memories and counts of the per-particle loop.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn touch_block(
+    first: usize,
+    ctx: &Substep,
+    collider: &Collider,
+    pos: &[Vec4],
+    out: &mut [Vec4],
+    side: &mut [Vec4],
+    c: usize,
+    st: &mut SubstepStats,
+) {
+    let nf = ctx.colliders.len().max(1);
+    let k0 = first % CHUNK;
+    let mut t = Touch::default();
+    for (m, p) in out.iter().enumerate() {
+        let (from, mem) = (pos[first + m], side[(k0 + m) * nf + c]);
+        for a in 0..3 {
+            (t.x[a][m], t.from[a][m]) = (p[a], from[a]);
+        }
+        for a in 0..4 {
+            t.side[a][m] = mem[a];
+        }
+        t.live[m] = ctx.pin_slot[first + m] == u32::MAX;
+    }
+    let r = contact_lanes::touch_unsigned(&collider.end, &t, ctx.eps, ctx.friction);
+    for (m, p) in out.iter_mut().enumerate() {
+        if r.remember[m] {
+            side[(k0 + m) * nf + c] = Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
+        }
+        if r.hit[m] {
+            *p = Vec4::new(r.x[0][m], r.x[1][m], r.x[2][m], p.w);
+            let hit = Hit {
+                depth: r.depth[m],
+                inside: r.inside[m],
+            };
+            record(st, hit);
+        }
     }
 }
 
