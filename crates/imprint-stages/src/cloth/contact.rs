@@ -51,7 +51,7 @@ pub struct Collider<'a> {
 impl Collider<'_> {
     /// The weight of `end` at fraction `s` of the frame (1 at its end, exactly).
     #[inline]
-    fn weight(&self, s: f32) -> f32 {
+    pub fn weight(&self, s: f32) -> f32 {
         let (a, b) = self.span;
         if s >= 1.0 { b } else { a + (b - a) * s }
     }

@@ -44,6 +44,8 @@ pub struct Touched {
     pub hit: [bool; LANES],
     pub inside: [bool; LANES],
     pub depth: Lanes,
+    /// Hits whose blend of two fields mixed a far one with a near one.
+    pub band_miss: [bool; LANES],
 }
 
 /// Reads `view` at the lanes' new positions and responds, as
@@ -54,64 +56,181 @@ pub fn touch_unsigned(view: &FieldView, t: &Touch, eps: f32, friction: f32) -> T
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { touch_avx2(view, t, eps, friction) };
+        return unsafe { touch_avx2(view, None, t, eps, friction) };
     }
-    touch_lanes(view, t, eps, friction)
+    touch_lanes(view, None, t, eps, friction)
+}
+
+/// [`touch_unsigned`] for a body read from two unsigned fields blended in time: `start`
+/// and `end` with weight `s` < 1 on `end` (H eq. 13-14, as
+/// [`super::contact::signed_sample`] blends them).
+#[inline]
+pub fn touch_blended(
+    start: &FieldView,
+    end: &FieldView,
+    s: f32,
+    t: &Touch,
+    eps: f32,
+    friction: f32,
+) -> Touched {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { touch_avx2(end, Some((start, s)), t, eps, friction) };
+    }
+    touch_lanes(end, Some((start, s)), t, eps, friction)
 }
 
 /// [`touch_lanes`] compiled for AVX2: the same operations, eight lanes per instruction.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn touch_avx2(view: &FieldView, t: &Touch, eps: f32, friction: f32) -> Touched {
-    touch_lanes(view, t, eps, friction)
+unsafe fn touch_avx2(
+    end: &FieldView,
+    start: Option<(&FieldView, f32)>,
+    t: &Touch,
+    eps: f32,
+    friction: f32,
+) -> Touched {
+    touch_lanes(end, start, t, eps, friction)
 }
 
+/// A sample read as signed, for one lane: whether there is one, the signed distance and
+/// the outward direction.
+type Signed = (bool, f32, [f32; 3]);
+
 #[inline(always)]
-fn touch_lanes(view: &FieldView, t: &Touch, eps: f32, friction: f32) -> Touched {
-    let (d, [vx, vy, vz]) = view.sample_lanes(&t.x);
-    let ([x0, y0, z0], [fx, fy, fz]) = (&t.x, &t.from);
-    let [sx, sy, sz, sw] = &t.side;
+fn touch_lanes(
+    end: &FieldView,
+    start: Option<(&FieldView, f32)>,
+    t: &Touch,
+    eps: f32,
+    friction: f32,
+) -> Touched {
+    let (db, vb, ib) = end.sample_lanes(&t.x);
+    let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
+    let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];
+    let reach = |m: usize| 2.0 * eps + length(each(|k| t.x[k][m] - t.from[k][m]));
+    // Each lane's sample read as signed, in straight loops over the lanes (which vectorise).
+    let (mut some, mut distance) = ([false; LANES], [0.0f32; LANES]);
+    let (mut outward, mut miss) = ([[0.0f32; 3]; LANES], [false; LANES]);
+    match start {
+        None => {
+            for m in 0..LANES {
+                (some[m], distance[m], outward[m]) =
+                    classify(db[m], lane(&vb, m), side(m), reach(m));
+            }
+        }
+        Some((start, s)) => {
+            let (da, va, ia) = start.sample_lanes(&t.x);
+            let far = end.field.far_value();
+            for m in 0..LANES {
+                let (a, b) = ((da[m], lane(&va, m)), (db[m], lane(&vb, m)));
+                let ((p, d, o), band_miss) =
+                    blend(a, ia[m], b, ib[m], s, side(m), reach(m), far, eps);
+                (some[m], distance[m], outward[m], miss[m]) = (p, d, o, band_miss);
+            }
+        }
+    }
     let mut out = Touched::default();
     for m in 0..LANES {
-        // `classify` without a sign: a vector and a finite distance, else no sample; the
-        // particle crossed when the vector runs along its remembered outward direction and
-        // the surface is within reach (its own step plus 2ε).
-        let some = vx[m] != 0.0 || vy[m] != 0.0 || vz[m] != 0.0;
-        let valid = t.live[m] & d[m].is_finite() & some;
-        let (dx, dy, dz) = (x0[m] - fx[m], y0[m] - fy[m], z0[m] - fz[m]);
-        let reach = 2.0 * eps + (dx * dx + dy * dy + dz * dz).sqrt();
-        let along_memory = vx[m] * sx[m] + vy[m] * sy[m] + vz[m] * sz[m];
-        let crossed = (sw[m] > 0.0) & (along_memory > 0.0) & (d[m] < reach);
-        let distance = if crossed { -d[m] } else { d[m] };
-        let (ox, oy, oz) = if crossed {
-            (vx[m], vy[m], vz[m])
-        } else {
-            (-vx[m], -vy[m], -vz[m])
-        };
         // `respond`: the memory, then a push to ε along the outward direction normalised
         // (`try_normalize`: none unless 1 / length is a positive finite number), friction.
-        let rcp = 1.0 / (ox * ox + oy * oy + oz * oz).sqrt();
-        let hit = valid & (distance < eps) & rcp.is_finite() & (rcp > 0.0);
-        let (nx, ny, nz) = (ox * rcp, oy * rcp, oz * rcp);
-        let push = eps - distance;
-        let (mut px, mut py, mut pz) = (x0[m] + push * nx, y0[m] + push * ny, z0[m] + push * nz);
+        let (o, d) = (outward[m], distance[m]);
+        let valid = t.live[m] & some[m];
+        let rcp: f32 = 1.0 / length(o);
+        let hit = valid & (d < eps) & rcp.is_finite() & (rcp > 0.0);
+        let n = each(|k| o[k] * rcp);
+        let push = eps - d;
+        let mut x = each(|k| t.x[k][m] + push * n[k]);
         if friction > 0.0 {
-            let (qx, qy, qz) = (px - fx[m], py - fy[m], pz - fz[m]);
-            let along = qx * nx + qy * ny + qz * nz;
-            px -= friction * (qx - along * nx);
-            py -= friction * (qy - along * ny);
-            pz -= friction * (qz - along * nz);
+            let q = each(|k| x[k] - t.from[k][m]);
+            let along = q[0] * n[0] + q[1] * n[1] + q[2] * n[2];
+            x = each(|k| x[k] - friction * (q[k] - along * n[k]));
         }
-        out.x[0][m] = if hit { px } else { x0[m] };
-        out.x[1][m] = if hit { py } else { y0[m] };
-        out.x[2][m] = if hit { pz } else { z0[m] };
-        (out.side[0][m], out.side[1][m], out.side[2][m]) = (ox, oy, oz);
+        for k in 0..3 {
+            out.x[k][m] = if hit { x[k] } else { t.x[k][m] };
+            out.side[k][m] = o[k];
+        }
         out.remember[m] = valid;
         out.hit[m] = hit;
-        out.inside[m] = hit & (distance < 0.0);
+        out.inside[m] = hit & (d < 0.0);
+        out.band_miss[m] = hit & miss[m];
         out.depth[m] = push;
     }
     out
+}
+
+/// `[f(0), f(1), f(2)]` (`array::map` is not inlined into the AVX2 build).
+#[inline(always)]
+fn each(f: impl Fn(usize) -> f32) -> [f32; 3] {
+    [f(0), f(1), f(2)]
+}
+
+#[inline(always)]
+fn length(v: [f32; 3]) -> f32 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// `contact::classify` without a sign: a vector and a finite distance, else no sample; the
+/// particle crossed when the vector runs along its remembered outward direction and the
+/// surface is within `reach`.
+#[inline(always)]
+fn classify(d: f32, v: [f32; 3], side: [f32; 4], reach: f32) -> Signed {
+    let valid = d.is_finite() & ((v[0] != 0.0) | (v[1] != 0.0) | (v[2] != 0.0));
+    let along_memory = v[0] * side[0] + v[1] * side[1] + v[2] * side[2];
+    let crossed = (side[3] > 0.0) & (along_memory > 0.0) & (d < reach);
+    let outward = each(|k| if crossed { v[k] } else { -v[k] });
+    (valid, if crossed { -d } else { d }, outward)
+}
+
+/// `contact::signed_sample`'s blend of the two fields' samples `a` (start) and `b` (end),
+/// each (distance, vector) and whether in the band, at weight `s`: also whether the blend
+/// mixed a far field with a near one (a band miss).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn blend(
+    a: (f32, [f32; 3]),
+    a_in: bool,
+    b: (f32, [f32; 3]),
+    b_in: bool,
+    s: f32,
+    side: [f32; 4],
+    reach: f32,
+    far: f32,
+    eps: f32,
+) -> (Signed, bool) {
+    let mix = |p: f32, q: f32| p + (q - p) * s;
+    match (a_in, b_in) {
+        (true, true) => {
+            // How far the body moved here between the two fields: its closest point did.
+            let reach = reach + length(each(|k| b.1[k] - a.1[k]));
+            let (p, q) = (
+                classify(a.0, a.1, side, reach),
+                classify(b.0, b.1, side, reach),
+            );
+            let distance = mix(p.1, q.1);
+            // In contact the outward directions are blended as unit vectors.
+            let unit = |o: [f32; 3]| {
+                let r = 1.0 / length(o);
+                if distance < eps {
+                    each(|k| o[k] * r)
+                } else {
+                    o
+                }
+            };
+            let (np, nq) = (unit(p.2), unit(q.2));
+            let both = (true, distance, each(|k| mix(np[k], nq[k])));
+            let one = if q.0 { q } else { p };
+            (if p.0 & q.0 { both } else { one }, false)
+        }
+        (false, true) => (classify(b.0, b.1, side, reach + far), true),
+        (true, false) => (classify(a.0, a.1, side, reach + far), true),
+        (false, false) => {
+            // Both at the band's edge: the blends of the cells' trilinear samples.
+            let v = each(|k| mix(a.1[k], b.1[k]));
+            (classify(mix(a.0, b.0), v, side, reach), false)
+        }
+    }
 }
 
 #[cfg(test)]
@@ -135,17 +254,85 @@ mod tests {
         }
     }
 
+    /// The exact field of a sphere of radius `r` about `c` on a 40³ grid of 2 cm cells.
+    fn sphere(r: f32, c: Vec3) -> DistanceField {
+        let spec = GridSpec::new(Vec3::splat(-0.39), 0.02, UVec3::splat(40)).unwrap();
+        DistanceField::from_closest_points(spec, 3.0, |p| {
+            c + r * (p - c).try_normalize().unwrap_or(Vec3::X)
+        })
+    }
+
+    /// Eight random particles about a sphere of radius `r`: in the band on both sides, at
+    /// its edge, far, in the grid's outermost cells and off it (every fourth `round`), with
+    /// and without a memory, some pinned.
+    fn particles(rng: &mut Rng, r: f32, round: usize) -> Touch {
+        let mut t = Touch::default();
+        for m in 0..LANES {
+            let x = match round % 4 {
+                0 => rng.vec() * 1.2,
+                _ => rng.vec().normalize_or(Vec3::Y) * (r + 0.12 * (rng.next() - 0.5)),
+            };
+            let from = x + rng.vec() * 0.03;
+            let side = rng.vec().extend((rng.next() > 0.3) as u32 as f32);
+            for a in 0..3 {
+                (t.x[a][m], t.from[a][m]) = (x[a], from[a]);
+            }
+            for a in 0..4 {
+                t.side[a][m] = side[a];
+            }
+            t.live[m] = rng.next() > 0.1;
+        }
+        t
+    }
+
+    /// Checks `lanes` against the per-particle sample and response of `collider` at frame
+    /// fraction `s`; returns (hits, particles found inside, band misses).
+    fn same_as_scalar(
+        collider: &Collider,
+        s: f32,
+        t: &Touch,
+        lanes: &Touched,
+        (eps, friction): (f32, f32),
+    ) -> (u32, u32, u32) {
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        let mut counts = (0, 0, 0);
+        for m in 0..LANES {
+            let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
+            let from = Vec3::new(t.from[0][m], t.from[1][m], t.from[2][m]);
+            let mut side = Vec4::new(t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]);
+            let mut y = x;
+            let sample = t.live[m]
+                .then(|| contact::signed_sample(collider, x, from, s, side, eps))
+                .flatten();
+            let hit =
+                sample.and_then(|s| contact::respond(&mut y, from, &s, &mut side, eps, friction));
+            assert_eq!(lanes.remember[m], sample.is_some(), "{x}");
+            if lanes.remember[m] {
+                let got = Vec3::new(lanes.side[0][m], lanes.side[1][m], lanes.side[2][m]);
+                assert_eq!(bits(got), bits(side.truncate()), "{x}");
+            }
+            assert_eq!(lanes.hit[m], hit.is_some(), "{x}");
+            let got = Vec3::new(lanes.x[0][m], lanes.x[1][m], lanes.x[2][m]);
+            assert_eq!(bits(got), bits(y), "{x}");
+            if let Some(h) = hit {
+                let miss = sample.is_some_and(|s| s.band_miss);
+                assert_eq!(lanes.depth[m].to_bits(), h.depth.to_bits());
+                assert_eq!((lanes.inside[m], lanes.band_miss[m]), (h.inside, miss));
+                counts.0 += 1;
+                counts.1 += h.inside as u32;
+                counts.2 += miss as u32;
+            }
+        }
+        counts
+    }
+
     /// Eight particles at a time give the per-particle contact's positions, memories and
-    /// counts to the bit, and the field reads its samples: particles in the band on both
-    /// sides of a sphere, at its band's edge, far, in the grid's outermost cells and off the
-    /// grid, with and without a memory, pinned, with and without friction.
+    /// counts to the bit, and the field reads its samples, with and without friction; the
+    /// build without AVX2 gives the same.
     #[test]
     fn same_bits_as_one_particle_at_a_time() {
         let (r, eps) = (0.3, 0.02);
-        let spec = GridSpec::new(Vec3::splat(-0.39), 0.02, UVec3::splat(40)).unwrap();
-        let field = DistanceField::from_closest_points(spec, 3.0, |p| {
-            r * p.try_normalize().unwrap_or(Vec3::X)
-        });
+        let field = sphere(r, Vec3::ZERO);
         let view = FieldView::new(&field);
         let collider = Collider {
             start: None,
@@ -153,78 +340,61 @@ mod tests {
             span: (0.0, 1.0),
         };
         let mut rng = Rng(0x9e3779b97f4a7c15);
-        let (mut hits, mut crossed) = (0, 0);
+        let (mut hits, mut inside) = (0, 0);
         for round in 0..4000 {
-            let mut t = Touch::default();
-            for m in 0..LANES {
-                // Mostly within the band around the sphere; some anywhere, some off the grid.
-                let x = match round % 4 {
-                    0 => rng.vec() * 1.2,
-                    _ => rng.vec().normalize_or(Vec3::Y) * (r + 0.12 * (rng.next() - 0.5)),
-                };
-                let from = x + rng.vec() * 0.03;
-                let side = rng.vec().extend((rng.next() > 0.3) as u32 as f32);
-                for a in 0..3 {
-                    (t.x[a][m], t.from[a][m]) = (x[a], from[a]);
-                }
-                for a in 0..4 {
-                    t.side[a][m] = side[a];
-                }
-                t.live[m] = rng.next() > 0.1;
-            }
-            let (d, v) = view.sample_lanes(&t.x);
+            let t = particles(&mut rng, r, round);
             let friction = if round % 2 == 0 { 0.3 } else { 0.0 };
             let lanes = touch_unsigned(&view, &t, eps, friction);
-            // The build without AVX2 (the same loops, as the processor's baseline runs them).
-            let plain = touch_lanes(&view, &t, eps, friction);
-            let all_bits = |o: &Touched| {
-                let f = |a: &[Lanes]| a.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
-                (
-                    f(&o.x),
-                    f(&o.side),
-                    o.remember,
-                    o.hit,
-                    o.inside,
-                    f(&[o.depth]),
-                )
-            };
-            assert_eq!(all_bits(&lanes), all_bits(&plain));
+            let (d, v, in_band) = view.sample_lanes(&t.x);
             for m in 0..LANES {
-                let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
-                let from = Vec3::new(t.from[0][m], t.from[1][m], t.from[2][m]);
-                let f = view.sample(x);
-                assert_eq!(d[m].to_bits(), f.distance.to_bits(), "{x}");
-                let bits = |v: Vec3| v.to_array().map(f32::to_bits);
-                assert_eq!(bits(Vec3::new(v[0][m], v[1][m], v[2][m])), bits(f.vector));
-                // The scalar path: sample, then respond.
-                let mut side = Vec4::new(t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]);
-                let mut y = x;
-                let sample = t.live[m]
-                    .then(|| contact::signed_sample(&collider, x, from, 1.0, side, eps))
-                    .flatten();
-                let hit = sample.and_then(|s| {
-                    crossed += (s.distance < 0.0) as u32;
-                    contact::respond(&mut y, from, &s, &mut side, eps, friction)
-                });
-                assert_eq!(lanes.remember[m], sample.is_some(), "{x}");
-                if lanes.remember[m] {
-                    let got = Vec3::new(lanes.side[0][m], lanes.side[1][m], lanes.side[2][m]);
-                    assert_eq!(bits(got), bits(side.truncate()), "{x}");
-                }
-                assert_eq!(lanes.hit[m], hit.is_some(), "{x}");
-                let got = Vec3::new(lanes.x[0][m], lanes.x[1][m], lanes.x[2][m]);
-                assert_eq!(bits(got), bits(y), "{x}");
-                if let Some(h) = hit {
-                    hits += 1;
-                    assert_eq!(lanes.depth[m].to_bits(), h.depth.to_bits());
-                    assert_eq!(lanes.inside[m], h.inside);
-                }
+                let f = view.sample(Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]));
+                let vector = Vec3::new(v[0][m], v[1][m], v[2][m]).to_array();
+                assert_eq!(d[m].to_bits(), f.distance.to_bits());
+                assert_eq!(
+                    vector.map(f32::to_bits),
+                    f.vector.to_array().map(f32::to_bits)
+                );
+                assert_eq!(in_band[m], f.in_band);
             }
+            let plain = touch_lanes(&view, None, &t, eps, friction);
+            assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
+            let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
+            (hits, inside) = (hits + h, inside + i);
         }
         // The cases were met: contacts, and particles found across the surface.
+        assert!(hits > 1000 && inside > 100, "{hits} hits, {inside} inside");
+    }
+
+    /// The same for a body read from two fields blended in time (a sphere that grew and
+    /// moved between them), at weights across the frame.
+    #[test]
+    fn blended_same_bits_as_one_particle_at_a_time() {
+        let (r, eps) = (0.3, 0.02);
+        let (a, b) = (
+            sphere(r, Vec3::ZERO),
+            sphere(r + 0.015, Vec3::new(0.02, 0.0, 0.01)),
+        );
+        let (va, vb) = (FieldView::new(&a), FieldView::new(&b));
+        let collider = Collider {
+            start: Some(va),
+            end: vb,
+            span: (0.0, 1.0),
+        };
+        let mut rng = Rng(0x2545f4914f6cdd1d);
+        let (mut hits, mut inside, mut misses) = (0, 0, 0);
+        for round in 0..4000 {
+            let t = particles(&mut rng, r, round);
+            let friction = if round % 2 == 0 { 0.3 } else { 0.0 };
+            let s = rng.next();
+            let lanes = touch_blended(&va, &vb, s, &t, eps, friction);
+            let plain = touch_lanes(&vb, Some((&va, s)), &t, eps, friction);
+            assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
+            let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
+            (hits, inside, misses) = (hits + h, inside + i, misses + b);
+        }
         assert!(
-            hits > 1000 && crossed > 100,
-            "{hits} hits, {crossed} crossed"
+            hits > 1000 && inside > 100 && misses > 10,
+            "{hits}, {inside}, {misses}"
         );
     }
 }

@@ -996,7 +996,7 @@ fn update_chunk(
     }
     let mut samples = [None; CHUNK];
     for (c, collider) in ctx.colliders.iter().enumerate() {
-        if collider.start.is_none() && !collider.end.is_signed() {
+        if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
             for (b, out) in next.chunks_mut(LANES).enumerate() {
                 touch_block(base + b * LANES, ctx, collider, pos, out, side, c, st);
             }
@@ -1077,7 +1077,7 @@ fn update_chunk(
 }
 
 /// The contact of particles `first..` (`out`, at most [`LANES`]; `side` the chunk's
-/// memories) with collider `c`, an unsigned field without a blend, a block at a time
+/// memories) with collider `c`, read from unsigned fields, a block at a time
 /// ([`contact_lanes`]): the positions, memories and counts of the per-particle loop.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -1104,7 +1104,13 @@ fn touch_block(
         }
         t.live[m] = ctx.pin_slot[first + m] == u32::MAX;
     }
-    let r = contact_lanes::touch_unsigned(&collider.end, &t, ctx.eps, ctx.friction);
+    let w = collider.weight(ctx.s);
+    let r = match collider.start {
+        Some(start) if w < 1.0 => {
+            contact_lanes::touch_blended(&start, &collider.end, w, &t, ctx.eps, ctx.friction)
+        }
+        _ => contact_lanes::touch_unsigned(&collider.end, &t, ctx.eps, ctx.friction),
+    };
     for (m, p) in out.iter_mut().enumerate() {
         if r.remember[m] {
             side[(k0 + m) * nf + c] = Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
@@ -1116,6 +1122,7 @@ fn touch_block(
                 inside: r.inside[m],
             };
             record(st, hit);
+            st.band_misses += r.band_miss[m] as u32;
         }
     }
 }

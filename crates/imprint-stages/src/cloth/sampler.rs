@@ -49,14 +49,18 @@ impl<'a> FieldView<'a> {
     }
 
     /// [`FieldView::sample`] at [`LANES`] points (`p[axis][lane]`), lane by lane the same
-    /// bits: the distances and the closest-point vectors. The lanes' cell coordinates,
+    /// bits: the distances, the closest-point vectors and whether in the band. The lanes' cell coordinates,
     /// weights and blends are computed side by side (loops over the lanes, which vectorise);
     /// one particle at a time, each read was a chain of dependent steps (a division, the
     /// cell's index, its loads, eight additions in order, a square root) that left the
     /// processor waiting. Lanes whose cells are not all inside the grid take
     /// [`FieldView::sample`].
     #[inline(always)]
-    pub fn sample_lanes(&self, p: &[[f32; LANES]; 3]) -> ([f32; LANES], [[f32; LANES]; 3]) {
+    #[allow(clippy::type_complexity)]
+    pub fn sample_lanes(
+        &self,
+        p: &[[f32; LANES]; 3],
+    ) -> ([f32; LANES], [[f32; LANES]; 3], [bool; LANES]) {
         let spec = &self.field.spec;
         let (origin, cell) = (spec.origin.to_array(), spec.cell);
         let dims = self.dims.to_array().map(|d| d as f32);
@@ -111,14 +115,15 @@ impl<'a> FieldView<'a> {
             let len = (v[0][m] * v[0][m] + v[1][m] * v[1][m] + v[2][m] * v[2][m]).sqrt();
             dist[m] = if far[m] { dist[m] } else { len };
         }
+        let mut in_band = far.map(|far| !far);
         for m in (0..LANES).filter(|&m| !inner[m]) {
             let f = self.sample(Vec3::new(p[0][m], p[1][m], p[2][m]));
-            dist[m] = f.distance;
+            (dist[m], in_band[m]) = (f.distance, f.in_band);
             for (a, v) in v.iter_mut().enumerate() {
                 v[m] = f.vector[a];
             }
         }
-        (dist, v)
+        (dist, v, in_band)
     }
 
     /// The field at `p`, as `Sampling::Vector` reads it.
