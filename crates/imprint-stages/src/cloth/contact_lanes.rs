@@ -48,50 +48,32 @@ pub struct Touched {
     pub band_miss: [bool; LANES],
 }
 
-/// Reads `view` at the lanes' new positions and responds, as
-/// [`super::contact::signed_sample`] (an unsigned field, no blend) and then
-/// [`super::contact::respond`] do one particle at a time.
-#[inline]
-pub fn touch_unsigned(view: &FieldView, t: &Touch, eps: f32, friction: f32) -> Touched {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { touch_avx2(view, None, t, eps, friction) };
-    }
-    touch_lanes(view, None, t, eps, friction)
+/// The fields a body is read from: `end`, or blended in time from `start` to `end` with
+/// weight `s` < 1 on `end` (H eq. 13-14) when `start` is `Some((start, s))`; unsigned.
+#[derive(Clone, Copy)]
+pub struct Fields<'a> {
+    pub end: &'a FieldView<'a>,
+    pub start: Option<(&'a FieldView<'a>, f32)>,
 }
 
-/// [`touch_unsigned`] for a body read from two unsigned fields blended in time: `start`
-/// and `end` with weight `s` < 1 on `end` (H eq. 13-14, as
-/// [`super::contact::signed_sample`] blends them).
+/// Reads the body at the lanes' new positions and responds, as
+/// [`super::contact::signed_sample`] and then [`super::contact::respond`] do one particle at
+/// a time.
 #[inline]
-pub fn touch_blended(
-    start: &FieldView,
-    end: &FieldView,
-    s: f32,
-    t: &Touch,
-    eps: f32,
-    friction: f32,
-) -> Touched {
+pub fn touch(f: Fields, t: &Touch, eps: f32, friction: f32) -> Touched {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { touch_avx2(end, Some((start, s)), t, eps, friction) };
+        return unsafe { touch_avx2(f, t, eps, friction) };
     }
-    touch_lanes(end, Some((start, s)), t, eps, friction)
+    touch_lanes(f, t, eps, friction)
 }
 
 /// [`touch_lanes`] compiled for AVX2: the same operations, eight lanes per instruction.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn touch_avx2(
-    end: &FieldView,
-    start: Option<(&FieldView, f32)>,
-    t: &Touch,
-    eps: f32,
-    friction: f32,
-) -> Touched {
-    touch_lanes(end, start, t, eps, friction)
+unsafe fn touch_avx2(f: Fields, t: &Touch, eps: f32, friction: f32) -> Touched {
+    touch_lanes(f, t, eps, friction)
 }
 
 /// A sample read as signed, for one lane: whether there is one, the signed distance and
@@ -99,13 +81,7 @@ unsafe fn touch_avx2(
 type Signed = (bool, f32, [f32; 3]);
 
 #[inline(always)]
-fn touch_lanes(
-    end: &FieldView,
-    start: Option<(&FieldView, f32)>,
-    t: &Touch,
-    eps: f32,
-    friction: f32,
-) -> Touched {
+fn touch_lanes(Fields { end, start }: Fields, t: &Touch, eps: f32, friction: f32) -> Touched {
     let (db, vb, ib) = end.sample_lanes(&t.x);
     let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
     let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];
@@ -240,18 +216,17 @@ mod tests {
     use glam::{UVec3, Vec3, Vec4};
     use imprint_core::{DistanceField, GridSpec};
 
-    /// A deterministic generator of uniform numbers in [0, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn vec(&mut self) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next()) - 0.5
-        }
+    /// A uniform number in [0, 1) from a linear congruential sequence (deterministic).
+    fn uniform(state: &mut u64) -> f32 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// A point uniform in [-0.5, 0.5)³.
+    fn centred(state: &mut u64) -> Vec3 {
+        Vec3::new(uniform(state), uniform(state), uniform(state)) - 0.5
     }
 
     /// The exact field of a sphere of radius `r` about `c` on a 40³ grid of 2 cm cells.
@@ -265,22 +240,22 @@ mod tests {
     /// Eight random particles about a sphere of radius `r`: in the band on both sides, at
     /// its edge, far, in the grid's outermost cells and off it (every fourth `round`), with
     /// and without a memory, some pinned.
-    fn particles(rng: &mut Rng, r: f32, round: usize) -> Touch {
+    fn particles(rng: &mut u64, r: f32, round: usize) -> Touch {
         let mut t = Touch::default();
         for m in 0..LANES {
             let x = match round % 4 {
-                0 => rng.vec() * 1.2,
-                _ => rng.vec().normalize_or(Vec3::Y) * (r + 0.12 * (rng.next() - 0.5)),
+                0 => centred(rng) * 1.2,
+                _ => centred(rng).normalize_or(Vec3::Y) * (r + 0.12 * (uniform(rng) - 0.5)),
             };
-            let from = x + rng.vec() * 0.03;
-            let side = rng.vec().extend((rng.next() > 0.3) as u32 as f32);
+            let from = x + centred(rng) * 0.03;
+            let side = centred(rng).extend((uniform(rng) > 0.3) as u32 as f32);
             for a in 0..3 {
                 (t.x[a][m], t.from[a][m]) = (x[a], from[a]);
             }
             for a in 0..4 {
                 t.side[a][m] = side[a];
             }
-            t.live[m] = rng.next() > 0.1;
+            t.live[m] = uniform(rng) > 0.1;
         }
         t
     }
@@ -339,12 +314,16 @@ mod tests {
             end: view,
             span: (0.0, 1.0),
         };
-        let mut rng = Rng(0x9e3779b97f4a7c15);
+        let mut rng = 0x9e3779b97f4a7c15u64;
         let (mut hits, mut inside) = (0, 0);
         for round in 0..4000 {
             let t = particles(&mut rng, r, round);
             let friction = if round % 2 == 0 { 0.3 } else { 0.0 };
-            let lanes = touch_unsigned(&view, &t, eps, friction);
+            let fields = Fields {
+                end: &view,
+                start: None,
+            };
+            let lanes = touch(fields, &t, eps, friction);
             let (d, v, in_band) = view.sample_lanes(&t.x);
             for m in 0..LANES {
                 let f = view.sample(Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]));
@@ -356,7 +335,7 @@ mod tests {
                 );
                 assert_eq!(in_band[m], f.in_band);
             }
-            let plain = touch_lanes(&view, None, &t, eps, friction);
+            let plain = touch_lanes(fields, &t, eps, friction);
             assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
             let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
             (hits, inside) = (hits + h, inside + i);
@@ -380,14 +359,18 @@ mod tests {
             end: vb,
             span: (0.0, 1.0),
         };
-        let mut rng = Rng(0x2545f4914f6cdd1d);
+        let mut rng = 0x2545f4914f6cdd1du64;
         let (mut hits, mut inside, mut misses) = (0, 0, 0);
         for round in 0..4000 {
             let t = particles(&mut rng, r, round);
             let friction = if round % 2 == 0 { 0.3 } else { 0.0 };
-            let s = rng.next();
-            let lanes = touch_blended(&va, &vb, s, &t, eps, friction);
-            let plain = touch_lanes(&vb, Some((&va, s)), &t, eps, friction);
+            let s = uniform(&mut rng);
+            let fields = Fields {
+                end: &vb,
+                start: Some((&va, s)),
+            };
+            let lanes = touch(fields, &t, eps, friction);
+            let plain = touch_lanes(fields, &t, eps, friction);
             assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
             let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
             (hits, inside, misses) = (hits + h, inside + i, misses + b);

@@ -10,7 +10,7 @@
 //! the springs are also read by blocks of eight particles ([`super::lanes`]), same bits.
 
 use super::contact::{self, Collider, Hit};
-use super::contact_lanes::{self, Touch};
+use super::contact_lanes::{self, Fields, Touch};
 use super::lanes::{Blocks, LANES, Lanes};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
@@ -1105,12 +1105,11 @@ fn touch_block(
         t.live[m] = ctx.pin_slot[first + m] == u32::MAX;
     }
     let w = collider.weight(ctx.s);
-    let r = match collider.start {
-        Some(start) if w < 1.0 => {
-            contact_lanes::touch_blended(&start, &collider.end, w, &t, ctx.eps, ctx.friction)
-        }
-        _ => contact_lanes::touch_unsigned(&collider.end, &t, ctx.eps, ctx.friction),
+    let fields = Fields {
+        end: &collider.end,
+        start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
+    let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction);
     for (m, p) in out.iter_mut().enumerate() {
         if r.remember[m] {
             side[(k0 + m) * nf + c] = Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
