@@ -25,24 +25,25 @@ pub enum Value {
 impl Value {
     /// Where the value is not finite, if anywhere (a value on the GPU is not looked at).
     pub fn first_non_finite(&self) -> Option<String> {
-        let bad = first_non_finite;
         match self {
             Value::Mesh(m) => {
                 let i = m.positions.iter().position(|p| !p.is_finite())?;
                 Some(format!("vertex {i} is at {}", m.positions[i]))
             }
             Value::Heights(h) => {
-                let i = bad(&h.heights)?;
+                let i = first_non_finite(&h.heights)?;
                 let (x, z) = (i as u32 % h.dims.x, i as u32 / h.dims.x);
                 Some(format!("the height of cell ({x}, {z}) is {}", h.heights[i]))
             }
             Value::Field(f) => match &f.data {
                 FieldData::Cpu(f) => {
-                    let i = bad(&f.dist)?;
+                    let i = first_non_finite(&f.dist)?;
                     Some(format!("the distance in cell {i} is {}", f.dist[i]))
                 }
                 FieldData::Blend { a, b, .. } => {
-                    let (f, i) = [a, b].into_iter().find_map(|f| Some((f, bad(&f.dist)?)))?;
+                    let (f, i) = [a, b]
+                        .into_iter()
+                        .find_map(|f| Some((f, first_non_finite(&f.dist)?)))?;
                     Some(format!("the distance in cell {i} is {}", f.dist[i]))
                 }
                 FieldData::Gpu(_) => None,

@@ -1,6 +1,7 @@
-//! The contact with a body read from one unsigned field (a body that did not change during
-//! the frame, so there is no blend in time), [`LANES`] particles at a time: the bits of
-//! [`contact::signed_sample`] followed by [`contact::respond`].
+//! The contact with a body read from unsigned fields (one field, or two blended in time as
+//! H eq. 13-14 does for a moving body), [`LANES`] particles at a time: the bits of
+//! [`contact::signed_sample`] followed by [`contact::respond`]. Signed fields keep the
+//! per-particle path in `cpu`.
 //!
 //! One particle at a time, a field read is a chain of dependent steps (a division, the
 //! cell's index, its loads, eight additions in order, a square root) and the response another

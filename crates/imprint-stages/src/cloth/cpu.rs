@@ -994,14 +994,15 @@ fn update_chunk(
     for (k, out) in next.iter_mut().enumerate() {
         *out = integrate(base + k, ctx, pos, prev, *out);
     }
-    let mut samples = [None; CHUNK];
     for (c, collider) in ctx.colliders.iter().enumerate() {
+        // Unsigned fields: eight particles at a time (the same bits as the loops below).
         if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
             for (b, out) in next.chunks_mut(LANES).enumerate() {
                 touch_block(base + b * LANES, ctx, collider, pos, out, side, c, st);
             }
             continue;
         }
+        let mut samples = [None; CHUNK];
         for (k, sample) in samples.iter_mut().enumerate().take(next.len()) {
             let i = base + k;
             *sample = if pinned(i) {

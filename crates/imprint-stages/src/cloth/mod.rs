@@ -11,8 +11,8 @@
 //!   deterministic on any number of threads; [`contact`]: projection out of the bodies with
 //!   friction (H eq. 11-12), which side of an unsigned field a particle is on, and the fields
 //!   blended in time (H §5.3); [`sampler`]: reading a field fast, with the field's numbers;
-//!   [`contact_lanes`]: the contact with an unchanging unsigned body eight particles at a
-//!   time, same bits;
+//!   [`contact_lanes`]: the contact with a body read from unsigned fields eight particles
+//!   at a time, same bits;
 //! - [`gpu`]: the same simulator on the GPU, [`gpu::GpuCloth`], one dispatch per substep;
 //! - [`stability`]: the largest stable substep, predicted before running, and the stress
 //!   map that checks it; [`metrics`]: what each frame reports.

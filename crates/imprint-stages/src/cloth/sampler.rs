@@ -49,11 +49,11 @@ impl<'a> FieldView<'a> {
     }
 
     /// [`FieldView::sample`] at [`LANES`] points (`p[axis][lane]`), lane by lane the same
-    /// bits: the distances, the closest-point vectors and whether in the band. The lanes' cell coordinates,
-    /// weights and blends are computed side by side (loops over the lanes, which vectorise);
-    /// one particle at a time, each read was a chain of dependent steps (a division, the
-    /// cell's index, its loads, eight additions in order, a square root) that left the
-    /// processor waiting. Lanes whose cells are not all inside the grid take
+    /// bits: the distances, the closest-point vectors and whether in the band. The lanes'
+    /// cell coordinates, weights and blends are computed side by side (loops over the lanes,
+    /// which vectorise); one particle at a time, each read was a chain of dependent steps (a
+    /// division, the cell's index, its loads, eight additions in order, a square root) that
+    /// left the processor waiting. Lanes whose cells are not all inside the grid take
     /// [`FieldView::sample`].
     #[inline(always)]
     #[allow(clippy::type_complexity)]

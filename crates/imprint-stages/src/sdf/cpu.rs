@@ -243,12 +243,13 @@ impl FieldBuild {
         let nxy = dims.0 * dims.1;
         let owner = self.owner.as_mut().expect("refining builds have owners");
         let rows = z.start * dims.1..z.end * dims.1;
-        // A build loaded from a checkpoint without spans writes them nowhere.
-        let mut none = vec![[0, 0]; rows.len()];
+        // A build loaded from a checkpoint without spans writes them into scratch.
+        let mut scratch = Vec::new();
         let spans = if self.spans.len() == dims.1 * dims.2 {
             &mut self.spans[rows]
         } else {
-            &mut none
+            scratch.resize(rows.len(), [0, 0]);
+            &mut scratch[..]
         };
         refine_to_faces(
             &mut self.dist[z.start * nxy..z.end * nxy],
