@@ -11,7 +11,7 @@
 
 use super::contact::{self, Collider, Hit};
 use super::contact_lanes::{self, Fields, Touch};
-use super::lanes::{Blocks, LANES, Lanes};
+use super::lanes::{Blocks, LANES, Lane, Lanes};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::FieldView;
@@ -126,9 +126,15 @@ struct FramePass {
 
 /// Everything a particle's update reads, for one substep.
 struct Substep<'a> {
-    /// The springs by blocks of eight particles, and the positions they read.
+    /// The springs by blocks of eight particles.
     blocks: &'a Blocks,
+    /// The positions at the substep's start and the substep before, and the inverse masses
+    /// (padded to whole blocks).
     at: &'a Lanes,
+    prev: &'a Lanes,
+    inv_mass: &'a [f32],
+    /// The particles (the rest of the last block is padding).
+    n: usize,
     hinges: &'a Hinges,
     faces: &'a Faces,
     pin_slot: &'a [u32],
@@ -165,11 +171,17 @@ pub struct ClothSim {
     /// `links` by blocks of eight particles, rebuilt from them after loading.
     #[serde(skip)]
     blocks: Blocks,
-    /// The positions (`state.pos`) and next positions as the blocks read them, within a frame.
+    /// Within a frame, the positions, previous and next positions by axis (structure of
+    /// arrays), and the inverse masses: the substeps work on these, and `state` takes them
+    /// back when the frame succeeds.
     #[serde(skip)]
     lanes: Lanes,
     #[serde(skip)]
+    lanes_prev: Lanes,
+    #[serde(skip)]
     lanes_next: Lanes,
+    #[serde(skip)]
+    inv_mass: Vec<f32>,
     hinges: Hinges,
     faces: Faces,
     pinned: Vec<u32>,
@@ -177,10 +189,10 @@ pub struct ClothSim {
     pin_slot: Vec<u32>,
     pin_from: Vec<Vec3>,
     pin_to: Vec<Vec3>,
+    /// The state at the start of the frame being stepped until it succeeds (the substeps
+    /// work on the lanes).
     state: ClothState,
-    next: Vec<Vec4>,
-    /// The state at the start of the frame being stepped, restored when it fails.
-    backup: ClothState,
+    /// The side memory at the frame's start, restored when the frame fails.
     backup_side: Vec<Vec4>,
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: Vec<Vec4>,
@@ -282,7 +294,9 @@ impl ClothSim {
             node: "cloth".into(),
             blocks: Blocks::build(&links, n),
             lanes: Lanes::default(),
+            lanes_prev: Lanes::default(),
             lanes_next: Lanes::default(),
+            inv_mass: Vec::new(),
             links,
             hinges,
             faces,
@@ -290,11 +304,6 @@ impl ClothSim {
             pin_slot,
             pin_from: targets.clone(),
             pin_to: targets,
-            backup: ClothState {
-                pos: pos.clone(),
-                prev: pos.clone(),
-            },
-            next: pos.clone(),
             state: ClothState {
                 prev: pos.clone(),
                 pos,
@@ -553,8 +562,6 @@ impl ClothSim {
     ) -> Result<ClothFrameMetrics> {
         let n_sub = self.params.substeps;
         let dt = dt_frame / n_sub as f32;
-        self.backup.pos.clone_from(&self.state.pos);
-        self.backup.prev.clone_from(&self.state.prev);
         self.backup_side.clone_from(&self.side);
         let backup_dt = self.dt_prev;
         let ke_start = self.kinetic_energy(self.dt_prev.unwrap_or(dt));
@@ -574,9 +581,18 @@ impl ClothSim {
             self.blocks = Blocks::build(&self.links, n);
         }
         self.lanes.resize(n);
+        self.lanes_prev.resize(n);
         self.lanes_next.resize(n);
-        for (i, p) in self.state.pos.iter().enumerate() {
+        self.inv_mass.clear();
+        self.inv_mass.resize(n.div_ceil(LANES) * LANES, 0.0);
+        for (i, (p, q)) in self.state.pos.iter().zip(&self.state.prev).enumerate() {
             (self.lanes.x[i], self.lanes.y[i], self.lanes.z[i]) = (p.x, p.y, p.z);
+            (
+                self.lanes_prev.x[i],
+                self.lanes_prev.y[i],
+                self.lanes_prev.z[i],
+            ) = (q.x, q.y, q.z);
+            self.inv_mass[i] = p.w;
         }
 
         let mut frame_stats = SubstepStats::new();
@@ -589,8 +605,7 @@ impl ClothSim {
             };
             let sub = self.substep(colliders, depth, s, dt);
             if let Err(what) = self.check(&sub, ke_limit) {
-                self.state.pos.clone_from(&self.backup.pos);
-                self.state.prev.clone_from(&self.backup.prev);
+                // `state` still holds the frame's start; the side memory changed in place.
                 self.side.clone_from(&self.backup_side);
                 self.dt_prev = backup_dt;
                 return Err(self
@@ -603,6 +618,11 @@ impl ClothSim {
             frame_stats.merge(&sub);
             frame_stats.inside = inside;
             last = sub;
+        }
+        for i in 0..n {
+            let w = self.inv_mass[i];
+            self.state.pos[i] = self.lanes.get(i).extend(w);
+            self.state.prev[i] = self.lanes_prev.get(i).extend(w);
         }
         for (k, to) in self.pin_to.iter().enumerate() {
             self.pin_from[k] = *to;
@@ -648,6 +668,9 @@ impl ClothSim {
         let ctx = Substep {
             blocks: &self.blocks,
             at: &self.lanes,
+            prev: &self.lanes_prev,
+            inv_mass: &self.inv_mass,
+            n: self.shape.len(),
             hinges: &self.hinges,
             faces: &self.faces,
             pin_slot: &self.pin_slot,
@@ -667,23 +690,17 @@ impl ClothSim {
             max_stretch: self.params.limits.max_stretch,
         };
         let nf = colliders.len().max(1);
-        let (pos, prev) = (&self.state.pos, &self.state.prev);
         let out = &mut self.lanes_next;
-        self.next
+        out.x
             .par_chunks_mut(CHUNK)
-            .zip(self.side.par_chunks_mut(CHUNK * nf))
-            .zip(self.stats.par_iter_mut())
-            .zip(out.x.par_chunks_mut(CHUNK))
             .zip(out.y.par_chunks_mut(CHUNK))
             .zip(out.z.par_chunks_mut(CHUNK))
+            .zip(self.side.par_chunks_mut(CHUNK * nf))
+            .zip(self.stats.par_iter_mut())
             .enumerate()
-            .for_each(|(c, (((((next, side), stats), x), y), z))| {
+            .for_each(|(c, ((((x, y), z), side), stats))| {
                 let mut st = SubstepStats::new();
-                update_chunk(c * CHUNK, &ctx, pos, prev, next, side, &mut st);
-                // The new positions as the next substep's blocks read them.
-                for (k, p) in next.iter().enumerate() {
-                    (x[k], y[k], z[k]) = (p.x, p.y, p.z);
-                }
+                update_chunk(c * CHUNK, &ctx, [x, y, z], side, &mut st);
                 *stats = st;
             });
         let mut total = SubstepStats::new();
@@ -692,8 +709,7 @@ impl ClothSim {
         }
         total.kinetic *= 0.5 * self.params.mass as f64 / (dt as f64 * dt as f64);
         total.max_accel = total.max_accel.sqrt() / (dt * dt);
-        std::mem::swap(&mut self.state.prev, &mut self.state.pos);
-        std::mem::swap(&mut self.state.pos, &mut self.next);
+        std::mem::swap(&mut self.lanes_prev, &mut self.lanes);
         std::mem::swap(&mut self.lanes, &mut self.lanes_next);
         self.dt_prev = Some(dt);
         total
@@ -812,7 +828,7 @@ impl ClothSim {
                         spring_force::<true>(i, &self.links, pos, f32::INFINITY)
                     }
                 };
-                f + hinge_force(i, &self.hinges, pos)
+                f + hinge_force(i, &self.hinges, |j| pos[j].truncate())
             })
             .collect()
     }
@@ -959,151 +975,263 @@ impl ClothSim {
     }
 }
 
-/// One chunk of particles through one substep, as a few short loops rather than one long
-/// one: forces (written into `next` as scratch), integration, then per collider the field
-/// samples and the responses, then the ground and the stats. A short loop body lets the
-/// processor overlap several particles' long dependency chains (square roots, divisions,
-/// field reads), which one long body does not. Each particle still sees the colliders in
-/// order, then the ground, exactly as one loop would do it.
-#[inline(always)]
+/// One chunk of particles (`base..`, whole blocks of [`LANES`]) through one substep, their
+/// next positions written into `out` (the chunk's part of the next positions, by axis). In
+/// the AVX2 build where the processor has it (decided once per process, as in
+/// `imprint_core::closest`): the loops over a block's lanes then take eight particles per
+/// instruction, with the same operations in the same order, so the same bits.
 fn update_chunk(
     base: usize,
     ctx: &Substep,
-    pos: &[Vec4],
-    prev: &[Vec4],
-    next: &mut [Vec4],
+    out: [&mut [f32]; 3],
     side: &mut [Vec4],
     st: &mut SubstepStats,
 ) {
-    let nf = ctx.colliders.len().max(1);
-    let pinned = |i: usize| ctx.pin_slot[i] != u32::MAX;
-    for (b, out) in next.chunks_mut(LANES).enumerate() {
-        let ([fx, fy, fz], over) = ctx.blocks.forces(base / LANES + b, ctx.at, ctx.max_stretch);
-        for (m, out) in out.iter_mut().enumerate() {
-            let i = base + b * LANES + m;
-            if over >> m & 1 == 1 {
-                st.overstretched = st.overstretched.min(i as u32);
-            }
-            let mut f = Vec3::new(fx[m], fy[m], fz[m]);
-            if !ctx.hinges.hinges.is_empty() {
-                f += hinge_force(i, ctx.hinges, pos);
-            }
-            *out = f.extend(0.0);
-        }
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { update_chunk_avx2(base, ctx, out, side, st) };
     }
-    for (k, out) in next.iter_mut().enumerate() {
-        *out = integrate(base + k, ctx, pos, prev, *out);
-    }
-    for (c, collider) in ctx.colliders.iter().enumerate() {
-        // Unsigned fields: eight particles at a time (the same bits as the loops below).
-        if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
-            for (b, out) in next.chunks_mut(LANES).enumerate() {
-                touch_block(base + b * LANES, ctx, collider, pos, out, side, c, st);
-            }
-            continue;
-        }
-        let mut samples = [None; CHUNK];
-        for (k, sample) in samples.iter_mut().enumerate().take(next.len()) {
-            let i = base + k;
-            *sample = if pinned(i) {
-                None
-            } else {
-                let (x, from) = (next[k].truncate(), pos[i].truncate());
-                contact::signed_sample(collider, x, from, ctx.s, side[k * nf + c], ctx.eps)
-            };
-        }
-        for (k, out) in next.iter_mut().enumerate() {
-            let Some(sample) = &samples[k] else { continue };
-            let mut x = out.truncate();
-            let from = pos[base + k].truncate();
-            let hit = contact::respond(
-                &mut x,
-                from,
-                sample,
-                &mut side[k * nf + c],
-                ctx.eps,
-                ctx.friction,
-            );
-            if let Some(hit) = hit {
-                record(st, hit);
-                st.band_misses += sample.band_miss as u32;
-            }
-            *out = x.extend(out.w);
-        }
-    }
-    for collider in ctx.depth {
-        for (k, out) in next.iter_mut().enumerate() {
-            let i = base + k;
-            if pinned(i) {
-                continue;
-            }
-            let mut x = out.truncate();
-            let from = pos[i].truncate();
-            let reach = 2.0 * ctx.eps + (x - from).length();
-            let Some(sample) = collider.sample(x, reach, ctx.s) else {
-                continue;
-            };
-            // Depth maps carry the side themselves: no memory to keep.
-            let mut side = glam::Vec4::ZERO;
-            if let Some(hit) =
-                contact::respond(&mut x, from, &sample, &mut side, ctx.eps, ctx.friction)
-            {
-                record(st, hit);
-            }
-            *out = x.extend(out.w);
-        }
-    }
-    for (k, out) in next.iter_mut().enumerate() {
-        let i = base + k;
-        if pinned(i) {
-            continue;
-        }
-        let (from, mut x) = (pos[i].truncate(), out.truncate());
-        if let Some(h) = ctx.ground
-            && let Some(hit) = contact::ground(&mut x, from, h, ctx.eps, ctx.friction)
-        {
-            record(st, hit);
-            *out = x.extend(out.w);
-        }
-        if !x.is_finite() {
-            st.nonfinite = st.nonfinite.min(i as u32);
-        }
-        // Squared step and squared change of step: scaled to energy and acceleration once
-        // per substep, not per particle.
-        let step = x - from;
-        let moved = (pos[i] - prev[i]).truncate() * ctx.ratio;
-        st.kinetic += step.length_squared() as f64;
-        st.max_accel = st.max_accel.max((step - moved).length_squared());
+    update_blocks(base, ctx, out, side, st)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn update_chunk_avx2(
+    base: usize,
+    ctx: &Substep,
+    out: [&mut [f32]; 3],
+    side: &mut [Vec4],
+    st: &mut SubstepStats,
+) {
+    update_blocks(base, ctx, out, side, st)
+}
+
+#[inline(always)]
+fn update_blocks(
+    base: usize,
+    ctx: &Substep,
+    [ox, oy, oz]: [&mut [f32]; 3],
+    side: &mut [Vec4],
+    st: &mut SubstepStats,
+) {
+    let blocks = ox.chunks_exact_mut(LANES).zip(oy.chunks_exact_mut(LANES));
+    for (b, ((ox, oy), oz)) in blocks.zip(oz.chunks_exact_mut(LANES)).enumerate() {
+        let x = step_block(base + b * LANES, ctx, side, st);
+        ox.copy_from_slice(&x[0]);
+        oy.copy_from_slice(&x[1]);
+        oz.copy_from_slice(&x[2]);
     }
 }
 
-/// The contact of particles `first..` (`out`, at most [`LANES`]; `side` the chunk's
-/// memories) with collider `c`, read from unsigned fields, a block at a time
-/// ([`contact_lanes`]): the positions, memories and counts of the per-particle loop.
+/// The next positions of particles `first..first + LANES` (lanes past the last particle:
+/// zero), in the order one particle's update takes: springs (and hinges), H eq. 10 (pins
+/// to their targets), the colliders in order, the depth maps, the ground; then the stats.
+/// `side` is the chunk's side memory.
+#[inline(always)]
+fn step_block(first: usize, ctx: &Substep, side: &mut [Vec4], st: &mut SubstepStats) -> [Lane; 3] {
+    let count = ctx.n.saturating_sub(first).min(LANES);
+    // Lanes that move freely: not pinned, not padding. (Loops, not `array::from_fn`, whose
+    // closures are not inlined into the AVX2 build.)
+    let mut live = [false; LANES];
+    for (m, live) in live.iter_mut().enumerate().take(count) {
+        *live = ctx.pin_slot[first + m] == u32::MAX;
+    }
+    let block = |a: &[f32]| -> Lane { a[first..first + LANES].try_into().expect("a block") };
+    let x = [block(&ctx.at.x), block(&ctx.at.y), block(&ctx.at.z)];
+    let xp = [block(&ctx.prev.x), block(&ctx.prev.y), block(&ctx.prev.z)];
+    let (mut f, over) = ctx.blocks.forces(first / LANES, ctx.at, ctx.max_stretch);
+    if over != 0 {
+        st.overstretched = st
+            .overstretched
+            .min((first + over.trailing_zeros() as usize) as u32);
+    }
+    if !ctx.hinges.hinges.is_empty() {
+        for (m, i) in (first..first + count).enumerate() {
+            let h = hinge_force(i, ctx.hinges, |j| ctx.at.get(j));
+            (0..3).for_each(|a| f[a][m] += h[a]);
+        }
+    }
+    // H eq. 10, as `Vec4` arithmetic does it axis by axis.
+    let mut moved = [[0.0f32; LANES]; 3];
+    for a in 0..3 {
+        for m in 0..LANES {
+            moved[a][m] = (x[a][m] - xp[a][m]) * ctx.ratio;
+        }
+    }
+    if let Some((wind, drag)) = ctx.wind {
+        for m in (0..count).filter(|&m| live[m]) {
+            let n = ctx.faces.area_normal_by(first + m, |j| ctx.at.get(j));
+            let rel = wind - Vec3::new(moved[0][m], moved[1][m], moved[2][m]) / ctx.dt;
+            let push = drag * n.normalize_or_zero().dot(rel) * n;
+            (0..3).for_each(|a| f[a][m] += push[a]);
+        }
+    }
+    let (dt2, g, w) = (ctx.dt * ctx.dt, ctx.gravity.to_array(), block(ctx.inv_mass));
+    let mut xn = [[0.0f32; LANES]; 3];
+    for a in 0..3 {
+        for m in 0..LANES {
+            let v = x[a][m] + ctx.damping * moved[a][m] + (f[a][m] * w[m] + g[a]) * dt2;
+            xn[a][m] = if m < count { v } else { 0.0 };
+        }
+    }
+    for m in (0..count).filter(|&m| !live[m]) {
+        let slot = ctx.pin_slot[first + m] as usize;
+        let (a, b) = (ctx.pin_from[slot], ctx.pin_to[slot]);
+        let p = if ctx.s >= 1.0 { b } else { a + (b - a) * ctx.s };
+        (0..3).for_each(|k| xn[k][m] = p[k]);
+    }
+    let k0 = first % CHUNK;
+    for (c, collider) in ctx.colliders.iter().enumerate() {
+        if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
+            touch_block(ctx, collider, &x, &mut xn, &live, side, k0, c, st);
+        } else {
+            for m in (0..count).filter(|&m| live[m]) {
+                let mem = &mut side[(k0 + m) * ctx.nf() + c];
+                let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
+                if let Some(sample) =
+                    contact::signed_sample(collider, p, from, ctx.s, *mem, ctx.eps)
+                    && let Some(hit) =
+                        contact::respond(&mut p, from, &sample, mem, ctx.eps, ctx.friction)
+                {
+                    record(st, hit);
+                    st.band_misses += sample.band_miss as u32;
+                }
+                (0..3).for_each(|k| xn[k][m] = p[k]);
+            }
+        }
+    }
+    for collider in ctx.depth {
+        for m in (0..count).filter(|&m| live[m]) {
+            let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
+            let reach = 2.0 * ctx.eps + (p - from).length();
+            let Some(sample) = collider.sample(p, reach, ctx.s) else {
+                continue;
+            };
+            // Depth maps carry the side themselves: no memory to keep.
+            let mut mem = Vec4::ZERO;
+            if let Some(hit) =
+                contact::respond(&mut p, from, &sample, &mut mem, ctx.eps, ctx.friction)
+            {
+                record(st, hit);
+            }
+            (0..3).for_each(|k| xn[k][m] = p[k]);
+        }
+    }
+    if let Some(h) = ctx.ground {
+        ground_block(h, ctx, &x, &mut xn, &live, st);
+    }
+    block_stats(first, &x, &moved, &xn, &live, st);
+    xn
+}
+
+/// Lane `m` of a block's positions.
+#[inline(always)]
+fn lane_vec(v: &[Lane; 3], m: usize) -> Vec3 {
+    Vec3::new(v[0][m], v[1][m], v[2][m])
+}
+
+/// [`contact::ground`] for a block's live lanes, computed for all and selected.
+#[inline(always)]
+fn ground_block(
+    h: f32,
+    ctx: &Substep,
+    from: &[Lane; 3],
+    x: &mut [Lane; 3],
+    live: &[bool; LANES],
+    st: &mut SubstepStats,
+) {
+    let target = h + ctx.eps;
+    let mut hits = [false; LANES];
+    let mut depth = [0.0f32; LANES];
+    for m in 0..LANES {
+        // A NaN height counts as below, as in `contact::ground`.
+        let above = x[1][m] >= target;
+        let hit = live[m] & !above;
+        depth[m] = target - x[1][m];
+        x[1][m] = if hit { target } else { x[1][m] };
+        if ctx.friction > 0.0 {
+            for a in [0, 2] {
+                let moved = x[a][m] - ctx.friction * (x[a][m] - from[a][m]);
+                x[a][m] = if hit { moved } else { x[a][m] };
+            }
+        }
+        hits[m] = hit;
+    }
+    for m in (0..LANES).filter(|&m| hits[m]) {
+        record(
+            st,
+            Hit {
+                depth: depth[m],
+                inside: depth[m] > ctx.eps,
+            },
+        );
+    }
+}
+
+/// A block's part of the substep's stats: the first non-finite particle, and for the live
+/// lanes in order the squared step (kinetic energy) and squared change of step
+/// (acceleration), scaled once per substep, not per particle.
+#[inline(always)]
+fn block_stats(
+    first: usize,
+    from: &[Lane; 3],
+    moved: &[Lane; 3],
+    x: &[Lane; 3],
+    live: &[bool; LANES],
+    st: &mut SubstepStats,
+) {
+    let mut step2 = [0.0f32; LANES];
+    let mut accel2 = [0.0f32; LANES];
+    let mut finite = [true; LANES];
+    for m in 0..LANES {
+        let s = [
+            x[0][m] - from[0][m],
+            x[1][m] - from[1][m],
+            x[2][m] - from[2][m],
+        ];
+        let d = [s[0] - moved[0][m], s[1] - moved[1][m], s[2] - moved[2][m]];
+        step2[m] = s[0] * s[0] + s[1] * s[1] + s[2] * s[2];
+        accel2[m] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        finite[m] = x[0][m].is_finite() & x[1][m].is_finite() & x[2][m].is_finite();
+    }
+    for m in (0..LANES).filter(|&m| live[m]) {
+        if !finite[m] {
+            st.nonfinite = st.nonfinite.min((first + m) as u32);
+        }
+        st.kinetic += step2[m] as f64;
+        st.max_accel = st.max_accel.max(accel2[m]);
+    }
+}
+
+/// The contact of a block's live lanes (new positions `x`, from `from`) with collider `c`,
+/// read from unsigned fields ([`contact_lanes`]); `side` holds the chunk's memories from
+/// lane 0 at `k0`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn touch_block(
-    first: usize,
     ctx: &Substep,
     collider: &Collider,
-    pos: &[Vec4],
-    out: &mut [Vec4],
+    from: &[Lane; 3],
+    x: &mut [Lane; 3],
+    live: &[bool; LANES],
     side: &mut [Vec4],
+    k0: usize,
     c: usize,
     st: &mut SubstepStats,
 ) {
-    let nf = ctx.colliders.len().max(1);
-    let k0 = first % CHUNK;
-    let mut t = Touch::default();
-    for (m, p) in out.iter().enumerate() {
-        let (from, mem) = (pos[first + m], side[(k0 + m) * nf + c]);
-        for a in 0..3 {
-            (t.x[a][m], t.from[a][m]) = (p[a], from[a]);
-        }
+    let nf = ctx.nf();
+    let mut t = Touch {
+        x: *x,
+        from: *from,
+        live: *live,
+        ..Default::default()
+    };
+    for m in (0..LANES).filter(|&m| live[m]) {
+        let mem = side[(k0 + m) * nf + c];
         for a in 0..4 {
             t.side[a][m] = mem[a];
         }
-        t.live[m] = ctx.pin_slot[first + m] == u32::MAX;
     }
     let w = collider.weight(ctx.s);
     let fields = Fields {
@@ -1111,12 +1239,12 @@ fn touch_block(
         start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
     let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction);
-    for (m, p) in out.iter_mut().enumerate() {
+    for m in 0..LANES {
         if r.remember[m] {
             side[(k0 + m) * nf + c] = Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
         }
         if r.hit[m] {
-            *p = Vec4::new(r.x[0][m], r.x[1][m], r.x[2][m], p.w);
+            (0..3).for_each(|a| x[a][m] = r.x[a][m]);
             let hit = Hit {
                 depth: r.depth[m],
                 inside: r.inside[m],
@@ -1127,27 +1255,12 @@ fn touch_block(
     }
 }
 
-/// H eq. 10 for particle `i` under the force `f` (pinned particles: their target), before
-/// contacts; w = the inverse mass.
-#[inline(always)]
-fn integrate(i: usize, ctx: &Substep, pos: &[Vec4], prev: &[Vec4], f: Vec4) -> Vec4 {
-    let xi4 = pos[i];
-    let slot = ctx.pin_slot[i];
-    if slot != u32::MAX {
-        let (a, b) = (ctx.pin_from[slot as usize], ctx.pin_to[slot as usize]);
-        let p = if ctx.s >= 1.0 { b } else { a + (b - a) * ctx.s };
-        return p.extend(0.0);
+impl Substep<'_> {
+    /// Side memories per particle.
+    #[inline(always)]
+    fn nf(&self) -> usize {
+        self.colliders.len().max(1)
     }
-    let inv_m = xi4.w;
-    let moved = (xi4 - prev[i]) * ctx.ratio;
-    let mut f = f;
-    if let Some((wind, drag)) = ctx.wind {
-        let n = ctx.faces.area_normal(i, pos);
-        let rel = wind - moved.truncate() / ctx.dt;
-        f += (drag * n.normalize_or_zero().dot(rel) * n).extend(0.0);
-    }
-    let xn = xi4 + ctx.damping * moved + (f * inv_m + ctx.gravity.extend(0.0)) * (ctx.dt * ctx.dt);
-    xn.truncate().extend(inv_m)
 }
 
 #[inline(always)]
@@ -1248,11 +1361,11 @@ fn spring_energy(i: usize, links: &Links, pos: &[Vec4]) -> (f32, f32) {
 
 /// Sum of the hinge bending forces on particle `i`: -U'(θ - θ_rest) dθ/dx_i per hinge.
 #[inline]
-fn hinge_force(i: usize, hinges: &Hinges, pos: &[Vec4]) -> Vec3 {
+fn hinge_force(i: usize, hinges: &Hinges, at: impl Fn(usize) -> Vec3) -> Vec3 {
     let mut f = Vec3::ZERO;
     for &r in &hinges.refs[hinges.offsets[i] as usize..hinges.offsets[i + 1] as usize] {
         let h = &hinges.hinges[(r / 4) as usize];
-        if let Some((theta, g)) = hinge_angle_gradient(h.v.map(|v| pos[v as usize].truncate())) {
+        if let Some((theta, g)) = hinge_angle_gradient(h.v.map(|v| at(v as usize))) {
             f -= hinge_slope(h.c, theta - h.rest_angle) * g[(r % 4) as usize];
         }
     }

@@ -1,5 +1,5 @@
-//! The springs' forces eight particles at a time (`wide::f32x8`), with the same bits as
-//! [`Links`] read one particle at a time.
+//! The springs' forces eight particles at a time, with the same bits as [`Links`] read one
+//! particle at a time.
 //!
 //! [`Links`] lists each particle's springs in quads, four springs per step. Here the
 //! particles go in blocks of eight, one particle per lane, and a block's springs in *slots*:
@@ -8,15 +8,21 @@
 //! accumulators (one per `l`) added up as `(a0 + a1) + (a2 + a3)`, the order the quad's
 //! horizontal sum takes: same forces, to the bit, as the per-particle code.
 //!
+//! The lanes are plain arrays in loops that vectorise, so that the cloth's substep, compiled
+//! for AVX2 where the processor has it (`cpu`), takes them eight per instruction.
+//!
 //! Positions are read from plain `x`, `y`, `z` arrays (structure of arrays). On a grid the
 //! eight particles of a block away from the edges have their `k`-th neighbours side by side
 //! too, so a slot's other ends are one load per axis (a *run*), not eight.
 
 use super::springs::{Links, SpringLaw};
-use wide::{CmpGe, CmpGt, f32x8};
+use glam::Vec3;
 
-/// Particles per block (lanes of `f32x8`).
+/// Particles per block.
 pub const LANES: usize = 8;
+
+/// One value per particle of a block.
+pub type Lane = [f32; LANES];
 
 /// Lengths below this count as zero when normalising a spring (as in `cpu`).
 const TINY: f32 = 1e-20;
@@ -28,9 +34,9 @@ struct Slot {
     other: [u32; LANES],
     /// `other[0]` when the other ends are consecutive (one load per axis), else `u32::MAX`.
     run: u32,
-    rest: f32x8,
-    k_stretch: f32x8,
-    k_compress: f32x8,
+    rest: Lane,
+    k_stretch: Lane,
+    k_compress: Lane,
 }
 
 /// [`Links`] regrouped by blocks of eight particles (see the module docs).
@@ -53,6 +59,12 @@ pub struct Lanes {
 }
 
 impl Lanes {
+    /// Particle `i`'s position.
+    #[inline(always)]
+    pub fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
     /// The first `n` rounded up to [`LANES`], zero beyond `n`.
     pub fn resize(&mut self, n: usize) {
         let len = n.div_ceil(LANES) * LANES;
@@ -64,8 +76,18 @@ impl Lanes {
 }
 
 #[inline(always)]
-fn load(a: &[f32], at: usize) -> f32x8 {
-    f32x8::new(a[at..at + LANES].try_into().expect("a block of 8"))
+fn load(a: &[f32], at: usize) -> Lane {
+    a[at..at + LANES].try_into().expect("a block of 8")
+}
+
+/// `a[at..at + 8]` in an AVX register.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn load8(a: &[f32], at: usize) -> std::arch::x86_64::__m256 {
+    let v = &a[at..at + LANES];
+    // SAFETY: `v` holds eight floats.
+    unsafe { std::arch::x86_64::_mm256_loadu_ps(v.as_ptr()) }
 }
 
 impl Blocks {
@@ -88,17 +110,16 @@ impl Blocks {
                     let mut s = Slot {
                         other: std::array::from_fn(|m| (first + m) as u32),
                         run: u32::MAX,
-                        rest: f32x8::ZERO,
-                        k_stretch: f32x8::ZERO,
-                        k_compress: f32x8::ZERO,
+                        rest: [0.0; LANES],
+                        k_stretch: [0.0; LANES],
+                        k_compress: [0.0; LANES],
                     };
-                    let (mut rest, mut ks, mut kc) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
                     for m in 0..LANES {
                         if let Some(quad) = quads(first + m).get(q) {
                             s.other[m] = quad.other[l];
-                            rest[m] = quad.rest[l];
-                            ks[m] = quad.k_stretch[l];
-                            kc[m] = quad.k_compress[l];
+                            s.rest[m] = quad.rest[l];
+                            s.k_stretch[m] = quad.k_stretch[l];
+                            s.k_compress[m] = quad.k_compress[l];
                         }
                     }
                     if (1..LANES).all(|m| s.other[m] == s.other[0] + m as u32)
@@ -106,7 +127,6 @@ impl Blocks {
                     {
                         s.run = s.other[0];
                     }
-                    (s.rest, s.k_stretch, s.k_compress) = (rest.into(), ks.into(), kc.into());
                     slots.push(s);
                 }
             }
@@ -127,8 +147,21 @@ impl Blocks {
 
     /// The spring forces on block `b`'s particles (x, y, z, lane by lane), and a bit per
     /// lane whose particle has a spring longer than `max_stretch` times its rest length.
+    /// AVX2 instructions where the processor has them (decided once per process), the same
+    /// bits either way.
     #[inline(always)]
-    pub fn forces(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([[f32; LANES]; 3], u32) {
+    pub fn forces(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([Lane; 3], u32) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.forces_avx2(b, at, max_stretch) };
+        }
+        self.forces_portable(b, at, max_stretch)
+    }
+
+    /// [`Blocks::forces`] in plain Rust.
+    #[inline(always)]
+    fn forces_portable(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([Lane; 3], u32) {
         if self.law == SpringLaw::Quadratic {
             self.forces_by::<true>(b, at, max_stretch)
         } else {
@@ -136,53 +169,174 @@ impl Blocks {
         }
     }
 
-    /// [`Blocks::forces`]; `QUAD` picks T eq. 1's law.
+    /// [`Blocks::forces_by`] in AVX2 instructions: the same operations in the same order, and
+    /// IEEE single precision gives their bits whatever the width (the compiler, left to
+    /// vectorise the loops itself, mixed lanes and axes and gained nothing).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn forces_avx2(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([Lane; 3], u32) {
+        use std::arch::x86_64::*;
+        let quadratic = self.law == SpringLaw::Quadratic;
+        let first = b * LANES;
+        let p = [
+            load8(&at.x, first),
+            load8(&at.y, first),
+            load8(&at.z, first),
+        ];
+        let (zero, tiny) = (_mm256_setzero_ps(), _mm256_set1_ps(TINY));
+        let (limit, sign) = (_mm256_set1_ps(max_stretch), _mm256_set1_ps(-0.0));
+        let mut acc = [[zero; 3]; 4];
+        let mut over = zero;
+        let slots = &self.slots[self.offsets[b] as usize..self.offsets[b + 1] as usize];
+        for quad in slots.chunks_exact(4) {
+            for (l, slot) in quad.iter().enumerate() {
+                let o = if slot.run != u32::MAX {
+                    let o = slot.run as usize;
+                    [load8(&at.x, o), load8(&at.y, o), load8(&at.z, o)]
+                } else {
+                    let mut v = [[0.0f32; LANES]; 3];
+                    for (m, &i) in slot.other.iter().enumerate() {
+                        let i = i as usize;
+                        (v[0][m], v[1][m], v[2][m]) = (at.x[i], at.y[i], at.z[i]);
+                    }
+                    [load8(&v[0], 0), load8(&v[1], 0), load8(&v[2], 0)]
+                };
+                // (No `array::map` here: its closures are not inlined into AVX2 code.)
+                let d = [
+                    _mm256_sub_ps(o[0], p[0]),
+                    _mm256_sub_ps(o[1], p[1]),
+                    _mm256_sub_ps(o[2], p[2]),
+                ];
+                let sq = |v| _mm256_mul_ps(v, v);
+                let len =
+                    _mm256_sqrt_ps(_mm256_add_ps(_mm256_add_ps(sq(d[0]), sq(d[1])), sq(d[2])));
+                let rest = load8(&slot.rest, 0);
+                let e = _mm256_sub_ps(len, rest);
+                let k = _mm256_blendv_ps(
+                    load8(&slot.k_compress, 0),
+                    load8(&slot.k_stretch, 0),
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(e, zero),
+                );
+                // `maxps` gives the second operand when either is NaN, as `forces_by`.
+                let mut c = _mm256_div_ps(_mm256_mul_ps(k, e), _mm256_max_ps(len, tiny));
+                if quadratic {
+                    c = _mm256_mul_ps(c, _mm256_andnot_ps(sign, e));
+                }
+                for (acc, d) in acc[l].iter_mut().zip(d) {
+                    *acc = _mm256_add_ps(*acc, _mm256_mul_ps(c, d));
+                }
+                let long = _mm256_cmp_ps::<_CMP_GT_OQ>(len, _mm256_mul_ps(rest, limit));
+                over = _mm256_or_ps(over, long);
+            }
+        }
+        let mut f = [[0.0f32; LANES]; 3];
+        for (a, f) in f.iter_mut().enumerate() {
+            let sum = _mm256_add_ps(
+                _mm256_add_ps(acc[0][a], acc[1][a]),
+                _mm256_add_ps(acc[2][a], acc[3][a]),
+            );
+            // SAFETY: `f` holds eight floats.
+            unsafe { _mm256_storeu_ps(f.as_mut_ptr(), sum) };
+        }
+        (f, _mm256_movemask_ps(over) as u32)
+    }
+
+    /// [`Blocks::forces`]; `QUAD` picks T eq. 1's law. A block's slots come four to a quad,
+    /// spring `l` of each quad into accumulator `l`; the loops over the lanes vectorise.
     #[inline(always)]
     fn forces_by<const QUAD: bool>(
         &self,
         b: usize,
         at: &Lanes,
         max_stretch: f32,
-    ) -> ([[f32; LANES]; 3], u32) {
+    ) -> ([Lane; 3], u32) {
         let first = b * LANES;
-        let (px, py, pz) = (load(&at.x, first), load(&at.y, first), load(&at.z, first));
-        let mut acc = [[f32x8::ZERO; 3]; 4];
-        let mut over = f32x8::ZERO;
-        let limit = f32x8::splat(max_stretch);
+        let p = [load(&at.x, first), load(&at.y, first), load(&at.z, first)];
+        let mut acc = [[[0.0f32; LANES]; 3]; 4];
+        let mut over = [false; LANES];
         let slots = &self.slots[self.offsets[b] as usize..self.offsets[b + 1] as usize];
-        for (s, slot) in slots.iter().enumerate() {
-            let (ox, oy, oz) = if slot.run != u32::MAX {
-                let o = slot.run as usize;
-                (load(&at.x, o), load(&at.y, o), load(&at.z, o))
-            } else {
-                let gather = |a: &[f32]| {
-                    let mut v = [0.0; LANES];
-                    for (v, &o) in v.iter_mut().zip(&slot.other) {
-                        *v = a[o as usize];
-                    }
-                    f32x8::new(v)
+        for quad in slots.chunks_exact(4) {
+            for (l, slot) in quad.iter().enumerate() {
+                let o = if slot.run != u32::MAX {
+                    let o = slot.run as usize;
+                    [load(&at.x, o), load(&at.y, o), load(&at.z, o)]
+                } else {
+                    let gather = |a: &[f32]| -> Lane {
+                        let mut v = [0.0; LANES];
+                        for (v, &o) in v.iter_mut().zip(&slot.other) {
+                            *v = a[o as usize];
+                        }
+                        v
+                    };
+                    [gather(&at.x), gather(&at.y), gather(&at.z)]
                 };
-                (gather(&at.x), gather(&at.y), gather(&at.z))
-            };
-            let (dx, dy, dz) = (ox - px, oy - py, oz - pz);
-            let len = (dx * dx + dy * dy + dz * dz).sqrt();
-            let e = len - slot.rest;
-            let k = e.cmp_ge(f32x8::ZERO).blend(slot.k_stretch, slot.k_compress);
-            let mut c = k * e / len.max(f32x8::splat(TINY));
-            if QUAD {
-                c *= e.abs();
+                let (c, d) = spring_lanes::<QUAD>(&p, &o, slot, max_stretch, &mut over);
+                for (acc, d) in acc[l].iter_mut().zip(&d) {
+                    for m in 0..LANES {
+                        acc[m] += c[m] * d[m];
+                    }
+                }
             }
-            let a = &mut acc[s % 4];
-            a[0] += c * dx;
-            a[1] += c * dy;
-            a[2] += c * dz;
-            over |= len.cmp_gt(slot.rest * limit);
         }
-        let sum = |axis: usize| {
-            ((acc[0][axis] + acc[1][axis]) + (acc[2][axis] + acc[3][axis])).to_array()
-        };
-        ([sum(0), sum(1), sum(2)], over.move_mask() as u32)
+        let mut f = [[0.0f32; LANES]; 3];
+        for (a, f) in f.iter_mut().enumerate() {
+            for m in 0..LANES {
+                f[m] = (acc[0][a][m] + acc[1][a][m]) + (acc[2][a][m] + acc[3][a][m]);
+            }
+        }
+        let mask = (0..LANES).fold(0, |mask, m| mask | (over[m] as u32) << m);
+        (f, mask)
     }
+}
+
+/// One slot's springs, lane by lane: the force's factor along the spring and the spring's
+/// vector (so the force is factor times vector); sets `over` where a spring is longer than
+/// `max_stretch` times its rest length. One operation at a time over the lanes, each a loop
+/// that becomes one vector instruction (written as one loop per lane, the compiler
+/// vectorised across the axes instead and shuffled).
+#[inline(always)]
+fn spring_lanes<const QUAD: bool>(
+    p: &[Lane; 3],
+    o: &[Lane; 3],
+    slot: &Slot,
+    max_stretch: f32,
+    over: &mut [bool; LANES],
+) -> (Lane, [Lane; 3]) {
+    let d = [
+        lanewise(|m| o[0][m] - p[0][m]),
+        lanewise(|m| o[1][m] - p[1][m]),
+        lanewise(|m| o[2][m] - p[2][m]),
+    ];
+    let [dx, dy, dz] = &d;
+    let len = lanewise(|m| (dx[m] * dx[m] + dy[m] * dy[m] + dz[m] * dz[m]).sqrt());
+    let e = lanewise(|m| len[m] - slot.rest[m]);
+    let k = lanewise(|m| {
+        if e[m] >= 0.0 {
+            slot.k_stretch[m]
+        } else {
+            slot.k_compress[m]
+        }
+    });
+    // `max` as SSE's: the second operand when either is NaN.
+    let len_or_tiny = lanewise(|m| if len[m] > TINY { len[m] } else { TINY });
+    let mut c = lanewise(|m| k[m] * e[m] / len_or_tiny[m]);
+    if QUAD {
+        c = lanewise(|m| c[m] * e[m].abs());
+    }
+    for m in 0..LANES {
+        over[m] |= len[m] > slot.rest[m] * max_stretch;
+    }
+    (c, d)
+}
+
+/// `[f(0), .., f(LANES - 1)]`, as a loop the compiler vectorises.
+#[inline(always)]
+fn lanewise(f: impl Fn(usize) -> f32) -> Lane {
+    let mut v = [0.0; LANES];
+    for (m, v) in v.iter_mut().enumerate() {
+        *v = f(m);
+    }
+    v
 }
 
 #[cfg(test)]
@@ -192,7 +346,8 @@ mod tests {
     use glam::Vec3;
 
     /// The blocks give the per-particle forces ([`ClothSim::forces`]) to the bit, on a grid
-    /// whose rows do not fill whole blocks, for both laws, with the particles jostled.
+    /// whose rows do not fill whole blocks, for both laws, with the particles jostled, in
+    /// both builds.
     #[test]
     fn same_bits_as_one_particle_at_a_time() {
         for (material, mode) in [
@@ -243,8 +398,13 @@ mod tests {
                 (at.x[i], at.y[i], at.z[i]) = (p.x, p.y, p.z);
             }
             let want = sim.forces();
-            for b in 0..n.div_ceil(LANES) {
-                let ([fx, fy, fz], over) = blocks.forces(b, &at, 10.0);
+            // Both builds: AVX2 (where the processor has it) and plain Rust.
+            let paths = [
+                Blocks::forces as fn(&Blocks, usize, &Lanes, f32) -> _,
+                Blocks::forces_portable,
+            ];
+            for (b, forces) in (0..n.div_ceil(LANES)).flat_map(|b| paths.map(|f| (b, f))) {
+                let ([fx, fy, fz], over) = forces(&blocks, b, &at, 10.0);
                 assert_eq!(over, 0);
                 for m in 0..LANES.min(n - b * LANES) {
                     let f = want[b * LANES + m];

@@ -528,10 +528,16 @@ impl Faces {
     /// particle's share of the area).
     #[inline]
     pub fn area_normal(&self, i: usize, pos: &[Vec4]) -> Vec3 {
-        let xi = pos[i].truncate();
+        self.area_normal_by(i, |j| pos[j].truncate())
+    }
+
+    /// [`Faces::area_normal`] with particle `j` at `at(j)`.
+    #[inline]
+    pub fn area_normal_by(&self, i: usize, at: impl Fn(usize) -> Vec3) -> Vec3 {
+        let xi = at(i);
         let mut n = Vec3::ZERO;
         for &[a, b] in &self.others[self.offsets[i] as usize..self.offsets[i + 1] as usize] {
-            n += (pos[a as usize].truncate() - xi).cross(pos[b as usize].truncate() - xi);
+            n += (at(a as usize) - xi).cross(at(b as usize) - xi);
         }
         n * (1.0 / 6.0)
     }
