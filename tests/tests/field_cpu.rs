@@ -402,6 +402,42 @@ fn cells_in_a_recycled_buffer_are_the_cells_computed_afresh() {
                 "step {k}, cell {i}"
             );
         }
+        for field in [&f, &afresh] {
+            assert_far_bricks_hold(field, &format!("step {k}"));
+        }
         builder.recycle(f);
     }
+}
+
+/// Where [`imprint_core::field::FarBricks`] says a read is plainly far, the eight cells it
+/// reads are exactly `(0, 0, 0, -far)`; and it says so for most reads away from the body (it
+/// is not empty).
+fn assert_far_bricks_hold(f: &imprint_core::DistanceField, what: &str) {
+    let far = glam::Vec4::new(0.0, 0.0, 0.0, -f.far_value())
+        .to_array()
+        .map(f32::to_bits);
+    let (cells, bricks) = (f.cells(), f.far_bricks());
+    let [nx, ny, nz] = f.spec.dims.to_array().map(|d| d as usize);
+    let (mut skipped, mut plainly_far) = (0, 0);
+    for (x, y, z) in
+        (0..nz - 1).flat_map(|z| (0..ny - 1).flat_map(move |y| (0..nx - 1).map(move |x| (x, y, z))))
+    {
+        let corners =
+            (0..8).map(|k| (x + (k & 1)) + nx * (y + (k >> 1 & 1)) + nx * ny * (z + (k >> 2)));
+        let all = corners
+            .clone()
+            .all(|i| cells[i].to_array().map(f32::to_bits) == far);
+        if bricks.all_far([x, y, z]) {
+            assert!(
+                all,
+                "{what}: cell ({x}, {y}, {z}) read as plainly far, but is not"
+            );
+            skipped += 1;
+        }
+        plainly_far += all as usize;
+    }
+    assert!(
+        skipped * 2 > plainly_far,
+        "{what}: {skipped} reads skipped of {plainly_far} plainly far"
+    );
 }

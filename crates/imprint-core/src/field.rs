@@ -1,6 +1,10 @@
 //! The resources of H §1-2: a discrete boundary (points on a grid) and the narrow-band
 //! distance field built from it.
 
+mod bricks;
+
+pub use bricks::FarBricks;
+
 use crate::GridSpec;
 use crate::closest::Batch;
 use glam::{UVec3, Vec3, Vec4};
@@ -125,7 +129,7 @@ pub struct DistanceField {
 /// [`DistanceField::cells`]). A clone starts empty again: the clone may be changed.
 #[derive(Default)]
 pub struct LazyCells {
-    cells: OnceLock<Vec<Vec4>>,
+    cells: OnceLock<(Vec<Vec4>, FarBricks)>,
     /// A buffer of the same grid whose cells are all far, to compute into.
     spare: Mutex<Option<SpareCells>>,
     /// Every far cell's distance is exactly the far value (a built field), so the cells can
@@ -169,7 +173,7 @@ impl Clone for LazyCells {
 impl std::fmt::Debug for LazyCells {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self.cells.get() {
-            Some(c) => write!(f, "LazyCells({} computed)", c.len()),
+            Some((c, _)) => write!(f, "LazyCells({} computed)", c.len()),
             None => f.write_str("LazyCells(not computed)"),
         }
     }
@@ -218,6 +222,15 @@ impl DistanceField {
     /// bits); given a spare buffer ([`LazyCells::built`]), only the rows' band spans are
     /// written. Either way the cells are the same bits.
     pub fn cells(&self) -> &[Vec4] {
+        &self.cached_cells().0
+    }
+
+    /// Where the [`DistanceField::cells`] are all plainly far (computed with them).
+    pub fn far_bricks(&self) -> &FarBricks {
+        &self.cached_cells().1
+    }
+
+    fn cached_cells(&self) -> &(Vec<Vec4>, FarBricks) {
         self.cells.cells.get_or_init(|| {
             let spec = &self.spec;
             let far = self.far_value();
@@ -236,7 +249,20 @@ impl DistanceField {
             out.par_chunks_mut(nx * ny)
                 .enumerate()
                 .for_each(|(z, plane)| self.plane_cells(z, plane, fresh));
-            out
+            // Written into a spare, only the band cells differ from far; fresh, any may.
+            let rows = self.spec.len() / nx;
+            let spans: Vec<_> = if fresh {
+                let far = Vec4::new(0.0, 0.0, 0.0, -far);
+                out.par_chunks(nx)
+                    .map(|row| bricks::not_far_span(row, far))
+                    .collect()
+            } else {
+                (0..rows)
+                    .map(|r| self.row_span(r, &self.nearest[r * nx..(r + 1) * nx]))
+                    .collect()
+            };
+            let bricks = FarBricks::from_rows(spec.dims, spans.into_iter());
+            (out, bricks)
         })
     }
 
@@ -283,7 +309,7 @@ impl DistanceField {
         if !self.cells.far_exact {
             return None;
         }
-        let mut buf = self.cells.cells.take()?;
+        let (mut buf, _) = self.cells.cells.take()?;
         let far = self.far_value();
         let (nx, ny) = (self.spec.dims.x as usize, self.spec.dims.y as usize);
         buf.par_chunks_mut(nx * ny)

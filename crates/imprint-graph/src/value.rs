@@ -287,7 +287,7 @@ impl Values {
                     every: *every,
                     weight: *weight,
                 },
-                _ => FieldSnapshot::One((*f.cpu(gpu)?).clone()),
+                _ => FieldSnapshot::One(Box::new((*f.cpu(gpu)?).clone())),
             };
             fields.insert(n.clone(), snap);
         }
@@ -349,8 +349,9 @@ pub struct ValuesSnapshot {
 
 #[derive(Clone, Serialize, Deserialize)]
 enum FieldSnapshot {
-    One(DistanceField),
-    /// Boxed: two fields beside one (serde writes a box as what it holds).
+    /// Boxed, as the two below (serde writes a box as what it holds).
+    One(Box<DistanceField>),
+    /// Boxed: two fields beside one.
     Blend {
         a: Box<DistanceField>,
         b: Box<DistanceField>,
@@ -363,7 +364,7 @@ enum FieldSnapshot {
 impl FieldSnapshot {
     fn into_data(self) -> FieldData {
         match self {
-            FieldSnapshot::One(f) => FieldData::Cpu(Arc::new(f)),
+            FieldSnapshot::One(f) => FieldData::Cpu(Arc::new(*f)),
             FieldSnapshot::Blend {
                 a,
                 b,

@@ -83,6 +83,14 @@ type Signed = (bool, f32, [f32; 3]);
 
 #[inline(always)]
 fn touch_lanes(Fields { end, start }: Fields, t: &Touch, eps: f32, friction: f32) -> Touched {
+    // Far from the body in every field: no lane has a sample (as below, where a read with no
+    // vector classifies as none), so none moves or remembers.
+    if end.lanes_far(&t.x) && start.is_none_or(|(f, _)| f.lanes_far(&t.x)) {
+        return Touched {
+            x: t.x,
+            ..Default::default()
+        };
+    }
     let (db, vb, ib) = end.sample_lanes(&t.x);
     let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
     let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];

@@ -12,6 +12,7 @@
 
 use super::lanes::LANES;
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
+use imprint_core::field::FarBricks;
 use imprint_core::{DistanceField, FieldSample, Sampling};
 
 /// A field and its cells, looked up once per frame.
@@ -19,6 +20,8 @@ use imprint_core::{DistanceField, FieldSample, Sampling};
 pub struct FieldView<'a> {
     pub field: &'a DistanceField,
     cells: &'a [Vec4],
+    /// Where the cells are all plainly far: reads there load none.
+    far_bricks: &'a FarBricks,
     /// The field's inside bits, when it is signed.
     signs: Option<&'a [u32]>,
     dims: IVec3,
@@ -38,6 +41,7 @@ impl<'a> FieldView<'a> {
         FieldView {
             field,
             cells: field.cells(),
+            far_bricks: field.far_bricks(),
             signs: field.inside.as_deref().map(|w| w.as_slice()),
             dims: field.spec.dims.as_ivec3(),
         }
@@ -80,8 +84,17 @@ impl<'a> FieldView<'a> {
         // The corners' cells by component, corner and lane (structure of arrays, so that the
         // blends below run across the lanes).
         let mut corners = [[[0.0f32; LANES]; 8]; 4];
+        let far = -self.field.far_value();
         for m in (0..LANES).filter(|&m| inner[m]) {
-            let i0 = b[0][m] as usize + nx * b[1][m] as usize + nxy * b[2][m] as usize;
+            let base = [b[0][m] as usize, b[1][m] as usize, b[2][m] as usize];
+            if self.far_bricks.all_far(base) {
+                // The cells are (0, 0, 0, -far): the values, not loaded.
+                for w in &mut corners[3] {
+                    w[m] = far;
+                }
+                continue;
+            }
+            let i0 = base[0] + nx * base[1] + nxy * base[2];
             for k in 0..8 {
                 let c = self.cells[i0 + (k & 1) + nx * ((k >> 1) & 1) + nxy * (k >> 2)];
                 for (a, comp) in corners.iter_mut().enumerate() {
@@ -124,6 +137,30 @@ impl<'a> FieldView<'a> {
             }
         }
         (dist, v, in_band)
+    }
+
+    /// Whether every one of the [`LANES`] points (`p[axis][lane]`) reads plainly far: off
+    /// the grid by a cell or more, or among cells that are all far ([`FarBricks`]). Such a
+    /// read has no vector and is not in the band, so no contact can come of it; this costs
+    /// a few operations per lane, where [`FieldView::sample_lanes`] loads eight cells.
+    #[inline(always)]
+    pub fn lanes_far(&self, p: &[[f32; LANES]; 3]) -> bool {
+        let spec = &self.field.spec;
+        let (origin, cell) = (spec.origin.to_array(), spec.cell);
+        let dims = self.dims.to_array().map(|d| d as f32);
+        let mut b = [[0.0f32; LANES]; 3];
+        let (mut inner, mut off) = ([true; LANES], [false; LANES]);
+        for a in 0..3 {
+            for m in 0..LANES {
+                // As `sample_lanes` and `cell_coords` compute the cell.
+                b[a][m] = ((p[a][m] - origin[a]) / cell).floor();
+                inner[m] &= b[a][m] >= 0.0 && b[a][m] + 1.0 < dims[a];
+                off[m] |= b[a][m] < -1.0 || b[a][m] >= dims[a];
+            }
+        }
+        (0..LANES).all(|m| {
+            off[m] || inner[m] && self.far_bricks.all_far([0, 1, 2].map(|a| b[a][m] as usize))
+        })
     }
 
     /// The field at `p`, as `Sampling::Vector` reads it.
