@@ -246,18 +246,23 @@ impl DistanceField {
                 None => (vec![Vec4::ZERO; spec.len()], true),
             };
             let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
-            out.par_chunks_mut(nx * ny)
+            // Written into a spare, only the band cells differ from far; fresh, any may: each
+            // plane's rows are scanned for them while the plane is in cache.
+            let far_cell = Vec4::new(0.0, 0.0, 0.0, -far);
+            let scanned: Vec<Vec<_>> = out
+                .par_chunks_mut(nx * ny)
                 .enumerate()
-                .for_each(|(z, plane)| self.plane_cells(z, plane, fresh));
-            // Written into a spare, only the band cells differ from far; fresh, any may.
-            let rows = self.spec.len() / nx;
+                .map(|(z, plane)| {
+                    self.plane_cells(z, plane, fresh);
+                    let rows = plane.chunks(nx).filter(|_| fresh);
+                    rows.map(|row| bricks::not_far_span(row, far_cell))
+                        .collect()
+                })
+                .collect();
             let spans: Vec<_> = if fresh {
-                let far = Vec4::new(0.0, 0.0, 0.0, -far);
-                out.par_chunks(nx)
-                    .map(|row| bricks::not_far_span(row, far))
-                    .collect()
+                scanned.into_iter().flatten().collect()
             } else {
-                (0..rows)
+                (0..spec.len() / nx)
                     .map(|r| self.row_span(r, &self.nearest[r * nx..(r + 1) * nx]))
                     .collect()
             };
