@@ -539,8 +539,10 @@ fn absurd_stiffness_fails_naming_frame_substep_and_the_substeps_that_fix_it() {
         "{warning}"
     );
     let start = cloth.positions();
+    let mut before = start.clone();
     let mut failed = None;
     for f in 0..5 {
+        before = cloth.positions();
         match cloth.step_frame(&[], &[], f, 1.0 / FPS) {
             Ok(m) => assert!(m.max_strain.is_finite()),
             Err(e) => {
@@ -567,6 +569,11 @@ fn absurd_stiffness_fails_naming_frame_substep_and_the_substeps_that_fix_it() {
     assert_eq!(e.exit_code(), 1);
     // Never garbage: the cloth is back where the failing frame started.
     assert!(cloth.positions().iter().all(|x| x.is_finite()));
+    assert_eq!(
+        cloth.positions(),
+        before,
+        "not put back where frame {f} started"
+    );
     if f == 0 {
         assert_eq!(cloth.positions(), start);
     }

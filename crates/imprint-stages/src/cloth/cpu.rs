@@ -6,8 +6,10 @@
 //! then rotates the three position buffers. Nothing a particle computes depends on which
 //! thread runs it or how the work is split, and every sum (energies, counts) is taken per
 //! fixed-size chunk and then over chunks in order, so a run gives the same bytes on 1 or
-//! 16 threads. The arrays are flat `Vec4`s and CSR lists, the layout the GPU path will bind;
-//! the springs are also read by blocks of eight particles ([`super::lanes`]), same bits.
+//! 16 threads. Between frames the particles are flat `Vec4`s (w the inverse mass) and the
+//! springs CSR lists, the layout the GPU path binds; within a frame the positions are kept by
+//! axis and stepped eight particles at a time ([`super::lanes`], [`super::contact_lanes`]),
+//! the same bits as one particle at a time.
 
 use super::contact::{self, Collider, Hit};
 use super::contact_lanes::{self, Fields, Touch};

@@ -39,6 +39,19 @@ struct Slot {
     k_compress: Lane,
 }
 
+impl Slot {
+    /// The other ends' positions, one lane at a time (a slot that is not a run).
+    #[inline(always)]
+    fn gather(&self, at: &Lanes) -> [Lane; 3] {
+        let mut v = [[0.0f32; LANES]; 3];
+        for (m, &i) in self.other.iter().enumerate() {
+            let i = i as usize;
+            (v[0][m], v[1][m], v[2][m]) = (at.x[i], at.y[i], at.z[i]);
+        }
+        v
+    }
+}
+
 /// [`Links`] regrouped by blocks of eight particles (see the module docs).
 #[derive(Clone, Debug, Default)]
 pub struct Blocks {
@@ -194,11 +207,7 @@ impl Blocks {
                     let o = slot.run as usize;
                     [load8(&at.x, o), load8(&at.y, o), load8(&at.z, o)]
                 } else {
-                    let mut v = [[0.0f32; LANES]; 3];
-                    for (m, &i) in slot.other.iter().enumerate() {
-                        let i = i as usize;
-                        (v[0][m], v[1][m], v[2][m]) = (at.x[i], at.y[i], at.z[i]);
-                    }
+                    let v = slot.gather(at);
                     [load8(&v[0], 0), load8(&v[1], 0), load8(&v[2], 0)]
                 };
                 // (No `array::map` here: its closures are not inlined into AVX2 code.)
@@ -261,14 +270,7 @@ impl Blocks {
                     let o = slot.run as usize;
                     [load(&at.x, o), load(&at.y, o), load(&at.z, o)]
                 } else {
-                    let gather = |a: &[f32]| -> Lane {
-                        let mut v = [0.0; LANES];
-                        for (v, &o) in v.iter_mut().zip(&slot.other) {
-                            *v = a[o as usize];
-                        }
-                        v
-                    };
-                    [gather(&at.x), gather(&at.y), gather(&at.z)]
+                    slot.gather(at)
                 };
                 let (c, d) = spring_lanes::<QUAD>(&p, &o, slot, max_stretch, &mut over);
                 for (acc, d) in acc[l].iter_mut().zip(&d) {

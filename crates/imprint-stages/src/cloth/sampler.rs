@@ -65,21 +65,7 @@ impl<'a> FieldView<'a> {
         &self,
         p: &[[f32; LANES]; 3],
     ) -> ([f32; LANES], [[f32; LANES]; 3], [bool; LANES]) {
-        let spec = &self.field.spec;
-        let (origin, cell) = (spec.origin.to_array(), spec.cell);
-        let dims = self.dims.to_array().map(|d| d as f32);
-        // Cell coordinates, their floor (exact below 2^24, as `cell_coords`) and fraction.
-        let mut t = [[0.0f32; LANES]; 3];
-        let mut b = [[0.0f32; LANES]; 3];
-        let mut inner = [true; LANES];
-        for a in 0..3 {
-            for m in 0..LANES {
-                let c = (p[a][m] - origin[a]) / cell;
-                b[a][m] = c.floor();
-                t[a][m] = c - b[a][m];
-                inner[m] &= b[a][m] >= 0.0 && b[a][m] + 1.0 < dims[a];
-            }
-        }
+        let (b, t, inner) = self.cell_lanes(p);
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
         // The corners' cells by component, corner and lane (structure of arrays, so that the
         // blends below run across the lanes).
@@ -145,22 +131,39 @@ impl<'a> FieldView<'a> {
     /// a few operations per lane, where [`FieldView::sample_lanes`] loads eight cells.
     #[inline(always)]
     pub fn lanes_far(&self, p: &[[f32; LANES]; 3]) -> bool {
+        let (b, _, inner) = self.cell_lanes(p);
+        let dims = self.dims.to_array().map(|d| d as f32);
+        (0..LANES).all(|m| {
+            // Off the grid by a cell or more: `read` gives the far sample.
+            let off = (0..3).any(|a| b[a][m] < -1.0 || b[a][m] >= dims[a]);
+            let base = [b[0][m] as usize, b[1][m] as usize, b[2][m] as usize];
+            off || inner[m] && self.far_bricks.all_far(base)
+        })
+    }
+
+    /// The lanes' cells (`p[axis][lane]`): their coordinates' floor (exact below 2^24, as
+    /// `cell_coords`), the fraction, and whether all eight cells of a read are in the grid.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn cell_lanes(
+        &self,
+        p: &[[f32; LANES]; 3],
+    ) -> ([[f32; LANES]; 3], [[f32; LANES]; 3], [bool; LANES]) {
         let spec = &self.field.spec;
         let (origin, cell) = (spec.origin.to_array(), spec.cell);
         let dims = self.dims.to_array().map(|d| d as f32);
+        let mut t = [[0.0f32; LANES]; 3];
         let mut b = [[0.0f32; LANES]; 3];
-        let (mut inner, mut off) = ([true; LANES], [false; LANES]);
+        let mut inner = [true; LANES];
         for a in 0..3 {
             for m in 0..LANES {
-                // As `sample_lanes` and `cell_coords` compute the cell.
-                b[a][m] = ((p[a][m] - origin[a]) / cell).floor();
+                let c = (p[a][m] - origin[a]) / cell;
+                b[a][m] = c.floor();
+                t[a][m] = c - b[a][m];
                 inner[m] &= b[a][m] >= 0.0 && b[a][m] + 1.0 < dims[a];
-                off[m] |= b[a][m] < -1.0 || b[a][m] >= dims[a];
             }
         }
-        (0..LANES).all(|m| {
-            off[m] || inner[m] && self.far_bricks.all_far([0, 1, 2].map(|a| b[a][m] as usize))
-        })
+        (b, t, inner)
     }
 
     /// The field at `p`, as `Sampling::Vector` reads it.
