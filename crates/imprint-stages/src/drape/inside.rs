@@ -21,7 +21,7 @@
 //! its cell centres (and left to the exact test when they disagree); points in near cells,
 //! beyond the grid, or of a mesh that is not closed take the exact test.
 
-use glam::{DVec2, DVec3, Vec2, Vec3, Vec4};
+use glam::{DVec2, DVec3, Vec2, Vec3};
 use imprint_core::{Aabb, Mesh};
 
 /// The inside test of one closed mesh.
@@ -384,16 +384,96 @@ struct AxisGrid {
     min: DVec2,
     cell: DVec2,
     n: [usize; 2],
-    /// Triangle lists per cell, as ranges into `boxes` and `items`.
+    /// Triangle lists per cell, as ranges of `blocks`.
     starts: Vec<u32>,
-    /// Per list entry, the triangle's projected box as (lo.u, lo.v, −hi.u, −hi.v): the
-    /// projection r lies in it when (r.u, r.v, −r.u, −r.v) is not below it, one 4-wide
-    /// comparison. Read before the triangle itself: most of a list is rejected from this one
-    /// contiguous stream.
-    boxes: Vec<Vec4>,
-    /// Per list entry, the triangle.
-    items: Vec<u32>,
+    /// The lists, [`BLOCK`] entries at a time, each list padded to whole blocks.
+    blocks: Vec<Block>,
     tris: Vec<Tri2>,
+}
+
+/// Entries of a list tested at once: one comparison instruction per bound with AVX.
+const BLOCK: usize = 8;
+
+/// [`BLOCK`] entries of a cell's list: their triangles' projected boxes by bound, read before
+/// the triangles themselves (most of a list is rejected from this one contiguous stream), and
+/// the triangles. A padding entry's box is empty (`lo` = +∞), so no point lies in it.
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Block {
+    lo_u: [f32; BLOCK],
+    lo_v: [f32; BLOCK],
+    hi_u: [f32; BLOCK],
+    hi_v: [f32; BLOCK],
+    items: [u32; BLOCK],
+}
+
+impl Block {
+    const EMPTY: Block = Block {
+        lo_u: [f32::INFINITY; BLOCK],
+        lo_v: [f32::INFINITY; BLOCK],
+        hi_u: [f32::NEG_INFINITY; BLOCK],
+        hi_v: [f32::NEG_INFINITY; BLOCK],
+        items: [0; BLOCK],
+    };
+
+    /// A bit per entry whose box holds `r` (no branch per entry: whether a box holds the
+    /// point is a coin toss the branch predictor loses).
+    #[inline(always)]
+    fn holds(&self, r: Vec2) -> u32 {
+        let mut mask = 0;
+        for k in 0..BLOCK {
+            let inside = (self.lo_u[k] <= r.x)
+                & (self.lo_v[k] <= r.y)
+                & (self.hi_u[k] >= r.x)
+                & (self.hi_v[k] >= r.y);
+            mask |= (inside as u32) << k;
+        }
+        mask
+    }
+}
+
+/// [`Block::holds`] for each of `blocks` into `out`, in AVX instructions where the CPU has
+/// them (decided once per process): the same comparisons, a block's per instruction.
+#[inline]
+fn holds_all(blocks: &[Block], r: Vec2, out: &mut [u32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above).
+        return unsafe { holds_all_avx(blocks, r, out) };
+    }
+    for (b, o) in blocks.iter().zip(out) {
+        *o = b.holds(r);
+    }
+}
+
+/// [`holds_all`] in AVX instructions (left to vectorise the loop itself, the compiler went
+/// across blocks, gathering lane by lane).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn holds_all_avx(blocks: &[Block], r: Vec2, out: &mut [u32]) {
+    use std::arch::x86_64::*;
+    let (u, v) = (_mm256_set1_ps(r.x), _mm256_set1_ps(r.y));
+    for (b, o) in blocks.iter().zip(out) {
+        // SAFETY: each bound is eight floats, 32-byte aligned (`Block` is, and each bound's
+        // offset is a multiple of 32).
+        let (lo_u, lo_v, hi_u, hi_v) = unsafe {
+            (
+                _mm256_load_ps(b.lo_u.as_ptr()),
+                _mm256_load_ps(b.lo_v.as_ptr()),
+                _mm256_load_ps(b.hi_u.as_ptr()),
+                _mm256_load_ps(b.hi_v.as_ptr()),
+            )
+        };
+        let lo = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_LE_OQ>(lo_u, u),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(lo_v, v),
+        );
+        let hi = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(hi_u, u),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(hi_v, v),
+        );
+        *o = _mm256_movemask_ps(_mm256_and_ps(lo, hi)) as u32;
+    }
 }
 
 /// A cell's side in average projected triangle boxes: finer cells mean shorter lists (fewer
@@ -415,9 +495,32 @@ struct Tri2 {
 }
 
 impl Tri2 {
+    /// `t` as the ray along `axis` sees it; `None` when it is parallel to the ray (never
+    /// crossed).
+    fn facing(t: &[Vec3; 3], axis: usize, uv: [usize; 2]) -> Option<Self> {
+        let mut p = t.map(|v| Vec2::new(v[uv[0]], v[uv[1]]));
+        let mut w = t.map(|v| v[axis]);
+        let d = p.map(|q| q.as_dvec2());
+        let area = (d[1] - d[0]).perp_dot(d[2] - d[0]);
+        if area == 0.0 || !area.is_finite() {
+            return None;
+        }
+        if area < 0.0 {
+            p.swap(1, 2);
+            w.swap(1, 2);
+        }
+        Some(Tri2 { p, w })
+    }
+
     #[inline]
     fn p(&self, k: usize) -> DVec2 {
         self.p[k].as_dvec2()
+    }
+
+    /// The projected box (lo, hi).
+    fn bounds(&self) -> (Vec2, Vec2) {
+        let [a, b, c] = self.p;
+        (a.min(b).min(c), a.max(b).max(c))
     }
 }
 
@@ -439,21 +542,10 @@ impl AxisGrid {
     fn new(tris: &[[Vec3; 3]], bounds: &Aabb, axis: usize) -> Self {
         let uv = [(axis + 1) % 3, (axis + 2) % 3];
         let proj = |v: Vec3| DVec2::new(v[uv[0]] as f64, v[uv[1]] as f64);
-        let mut kept = Vec::with_capacity(tris.len());
-        for t in tris {
-            let mut p = t.map(|v| Vec2::new(v[uv[0]], v[uv[1]]));
-            let mut w = t.map(|v| v[axis]);
-            let d = p.map(|q| q.as_dvec2());
-            let area = (d[1] - d[0]).perp_dot(d[2] - d[0]);
-            if area == 0.0 || !area.is_finite() {
-                continue; // parallel to the ray: never crossed
-            }
-            if area < 0.0 {
-                p.swap(1, 2);
-                w.swap(1, 2);
-            }
-            kept.push(Tri2 { p, w });
-        }
+        let kept: Vec<Tri2> = tris
+            .iter()
+            .filter_map(|t| Tri2::facing(t, axis, uv))
+            .collect();
         let min = if bounds.is_empty() {
             DVec2::ZERO
         } else {
@@ -470,8 +562,8 @@ impl AxisGrid {
         let extent: f64 = kept
             .iter()
             .map(|t| {
-                let d = t.p[0].max(t.p[1]).max(t.p[2]) - t.p[0].min(t.p[1]).min(t.p[2]);
-                d.max_element() as f64
+                let (lo, hi) = t.bounds();
+                (hi - lo).max_element() as f64
             })
             .sum::<f64>()
             / kept.len().max(1) as f64;
@@ -480,52 +572,47 @@ impl AxisGrid {
         let n = [0, 1].map(|a| ((size[a] / side).ceil() as usize).clamp(1, MAX_SIDE));
         let cell = size / DVec2::new(n[0] as f64, n[1] as f64);
         // `as` truncates, which is the floor for c >= 0 (and 0 below, as the clamp would be).
-        let cell_of = |q: DVec2| {
-            let c = (q - min) / cell;
+        let cell_of = |g: DVec2| {
             [
-                (c.x.max(0.0) as usize).min(n[0] - 1),
-                (c.y.max(0.0) as usize).min(n[1] - 1),
+                (g.x.max(0.0) as usize).min(n[0] - 1),
+                (g.y.max(0.0) as usize).min(n[1] - 1),
             ]
         };
-        let mut counts = vec![0u32; n[0] * n[1] + 1];
-        let mut boxes: Vec<(Vec2, Vec2, [usize; 2], [usize; 2])> = kept
+        // Per triangle, the first and last cell its box meets.
+        let spans: Vec<[[usize; 2]; 2]> = kept
             .iter()
             .map(|t| {
-                let lo = t.p[0].min(t.p[1]).min(t.p[2]);
-                let hi = t.p[0].max(t.p[1]).max(t.p[2]);
-                (lo, hi, cell_of(lo.as_dvec2()), cell_of(hi.as_dvec2()))
+                let (lo, hi) = t.bounds();
+                [cell_of(grid(min, cell, lo)), cell_of(grid(min, cell, hi))]
             })
             .collect();
-        // The triangles in the order of the cells their boxes start in: a query reads the
-        // triangles of a few neighbouring cells, then close together in memory, not spread
-        // over the mesh's order. (The answers do not depend on the order of a list.)
-        let mut order: Vec<u32> = (0..kept.len() as u32).collect();
-        order.sort_by_key(|&t| {
-            let l = boxes[t as usize].2;
-            l[1] * n[0] + l[0]
-        });
-        kept = order.iter().map(|&t| kept[t as usize]).collect();
-        boxes = order.iter().map(|&t| boxes[t as usize]).collect();
-        for (_, _, l, h) in &boxes {
+        let cells = n[0] * n[1];
+        let order = by_first_cell(&spans, n);
+        let mut counts = vec![0u32; cells];
+        for [l, h] in &spans {
             for j in l[1]..=h[1] {
-                for c in &mut counts[j * n[0] + l[0] + 1..=j * n[0] + h[0] + 1] {
+                for c in &mut counts[j * n[0] + l[0]..=j * n[0] + h[0]] {
                     *c += 1;
                 }
             }
         }
-        for k in 1..counts.len() {
-            counts[k] += counts[k - 1];
+        let mut starts = vec![0u32; cells + 1];
+        for c in 0..cells {
+            starts[c + 1] = starts[c] + counts[c].div_ceil(BLOCK as u32);
         }
-        let mut fill = counts.clone();
-        let total = *counts.last().unwrap() as usize;
-        let (mut entry_boxes, mut items) = (vec![Vec4::ZERO; total], vec![0u32; total]);
-        for (t, &(lo, hi, l, h)) in boxes.iter().enumerate() {
-            let b = Vec4::new(lo.x, lo.y, -hi.x, -hi.y);
+        let mut blocks = vec![Block::EMPTY; starts[cells] as usize];
+        // The next free entry of each cell's list.
+        let mut fill: Vec<u32> = starts[..cells].iter().map(|&s| s * BLOCK as u32).collect();
+        for (t, &old) in order.iter().enumerate() {
+            let (lo, hi) = kept[old as usize].bounds();
+            let [l, h] = spans[old as usize];
             for j in l[1]..=h[1] {
-                for c in j * n[0] + l[0]..=j * n[0] + h[0] {
-                    entry_boxes[fill[c] as usize] = b;
-                    items[fill[c] as usize] = t as u32;
-                    fill[c] += 1;
+                for f in &mut fill[j * n[0] + l[0]..=j * n[0] + h[0]] {
+                    let (b, k) = (*f as usize / BLOCK, *f as usize % BLOCK);
+                    let b = &mut blocks[b];
+                    (b.lo_u[k], b.lo_v[k], b.hi_u[k], b.hi_v[k]) = (lo.x, lo.y, hi.x, hi.y);
+                    b.items[k] = t as u32;
+                    *f += 1;
                 }
             }
         }
@@ -535,10 +622,9 @@ impl AxisGrid {
             min,
             cell,
             n,
-            starts: counts,
-            boxes: entry_boxes,
-            items,
-            tris: kept,
+            starts,
+            blocks,
+            tris: order.iter().map(|&t| kept[t as usize]).collect(),
         }
     }
 
@@ -551,32 +637,31 @@ impl AxisGrid {
     fn each_hit(&self, p: Vec3, mut visit: impl FnMut(f64) -> bool) -> Option<bool> {
         let r = Vec2::new(p[self.uv[0]], p[self.uv[1]]);
         let q = r.as_dvec2();
-        let c = ((q - self.min) / self.cell).floor();
-        // Beyond the box: no triangle. On its far side: the last cell (as the binning clamps).
-        if !(c.x >= 0.0 && c.y >= 0.0 && c.x <= self.n[0] as f64 && c.y <= self.n[1] as f64) {
+        let c = grid(self.min, self.cell, r);
+        // Beyond the box: no triangle. On its far side (the cell's floor is n): the last cell,
+        // as the binning clamps. (`as` below truncates, the floor for c >= 0; `floor` itself is
+        // a library call on x86-64 without SSE4.1.)
+        let n = DVec2::new(self.n[0] as f64, self.n[1] as f64) + 1.0;
+        if !(c.x >= 0.0 && c.y >= 0.0 && c.x < n.x && c.y < n.y) {
             return None;
         }
         let cell =
             (c.y as usize).min(self.n[1] - 1) * self.n[0] + (c.x as usize).min(self.n[0] - 1);
-        let range = self.starts[cell] as usize..self.starts[cell + 1] as usize;
-        let key = Vec4::new(r.x, r.y, -r.x, -r.y);
-        // 32 boxes at a time into a bit mask, without a branch per box (whether a box holds
-        // the point is a coin toss the branch predictor loses), then the triangles of the set
-        // bits.
-        for (boxes, items) in self.boxes[range.clone()]
-            .chunks(32)
-            .zip(self.items[range].chunks(32))
-        {
-            let mut mask = boxes.iter().enumerate().fold(0u32, |m, (k, b)| {
-                m | ((b.cmple(key).bitmask() == 0b1111) as u32) << k
-            });
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                if let Some(w) = crossing(&self.tris[items[k] as usize], q)
-                    && !visit(w)
-                {
-                    return Some(false);
+        let list = &self.blocks[self.starts[cell] as usize..self.starts[cell + 1] as usize];
+        // The boxes' masks a chunk of blocks at a time, then the triangles of the set bits.
+        let mut masks = [0u32; 32];
+        for chunk in list.chunks(masks.len()) {
+            holds_all(chunk, r, &mut masks);
+            for (b, &mask) in chunk.iter().zip(&masks) {
+                let mut mask = mask;
+                while mask != 0 {
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if let Some(w) = crossing(&self.tris[b.items[k] as usize], q)
+                        && !visit(w)
+                    {
+                        return Some(false);
+                    }
                 }
             }
         }
@@ -598,6 +683,34 @@ impl AxisGrid {
     }
 }
 
+/// A projected point in a grid's coordinates (cells from `min`; the cell's index is the floor).
+#[inline]
+fn grid(min: DVec2, cell: DVec2, x: Vec2) -> DVec2 {
+    (x.as_dvec2() - min) / cell
+}
+
+/// The triangles' order by the cell their box starts in (a counting sort: stable, in the
+/// mesh's order within a cell). A query reads the triangles of a few neighbouring cells, then
+/// close together in memory, not spread over the mesh's order; the answers do not depend on
+/// the order of a list.
+fn by_first_cell(spans: &[[[usize; 2]; 2]], n: [usize; 2]) -> Vec<u32> {
+    let key = |s: &[[usize; 2]; 2]| s[0][1] * n[0] + s[0][0];
+    let mut next = vec![0u32; n[0] * n[1] + 1];
+    for s in spans {
+        next[key(s) + 1] += 1;
+    }
+    for c in 1..next.len() {
+        next[c] += next[c - 1];
+    }
+    let mut order = vec![0u32; spans.len()];
+    for (t, s) in spans.iter().enumerate() {
+        let at = &mut next[key(s)];
+        order[*at as usize] = t as u32;
+        *at += 1;
+    }
+    order
+}
+
 /// Where the ray through `q` crosses the triangle (its axis coordinate), if it does. An edge
 /// owns the points on it when it runs "up" (dv > 0, or dv = 0 and du < 0): of two triangles
 /// sharing an edge (traversed in opposite directions), exactly one owns it.
@@ -610,8 +723,9 @@ fn crossing(t: &Tri2, q: DVec2) -> Option<f64> {
         let c = t.p((k + 2) % 3);
         let d = c - a;
         let e = d.perp_dot(q - a);
-        let owns = d.y > 0.0 || (d.y == 0.0 && d.x < 0.0);
-        (e, e > 0.0 || (e == 0.0 && owns))
+        // `|` and `&`, not `||` and `&&`: no branches.
+        let owns = (d.y > 0.0) | ((d.y == 0.0) & (d.x < 0.0));
+        (e, (e > 0.0) | ((e == 0.0) & owns))
     };
     let ((e0, k0), (e1, k1), (e2, k2)) = (edge(0), edge(1), edge(2));
     let sum = e0 + e1 + e2;
@@ -720,8 +834,15 @@ mod tests {
     fn bins_answer_as_all_triangles() {
         let mut u = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
         u.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
-        for (mesh, seed) in [(torus(0.5, 0.2, 60, 24), 5), (u, 6)] {
+        // A sphere of thin wedges: its poles' cells list hundreds of triangles (more than one
+        // chunk of blocks per walk).
+        let wedges = uv_sphere(1.0, 300, 8);
+        for (mesh, seed) in [(torus(0.5, 0.2, 60, 24), 5), (u, 6), (wedges, 7)] {
             let t = InsideTest::rays_only(&mesh);
+            let longest = |g: &AxisGrid| g.starts.windows(2).map(|w| w[1] - w[0]).max();
+            if seed == 7 {
+                assert!(t.axes.iter().any(|g| longest(g) > Some(32)));
+            }
             let b = mesh.bounds();
             let (lo, size) = (b.min - 0.1 * (b.max - b.min), 1.2 * (b.max - b.min));
             let mut rng = Rng(seed);
@@ -751,6 +872,45 @@ mod tests {
                     assert_eq!(g.odd_crossings(p), all, "axis {} at {p:?}", g.axis);
                 }
             }
+        }
+    }
+
+    /// The boxes' masks are the same bits in AVX instructions as in plain Rust, at random
+    /// points and at the boxes' own corners (the bounds are inclusive), padding included.
+    #[test]
+    fn masks_same_in_both_builds() {
+        let t = InsideTest::rays_only(&torus(0.5, 0.2, 60, 24));
+        let mut rng = Rng(9);
+        let mut out = [0u32; 32];
+        for g in &t.axes {
+            let b = &g.blocks;
+            let mut points: Vec<Vec2> = (0..2000)
+                .map(|_| {
+                    let f = Vec2::new(rng.next(), rng.next()) * 1.2 - 0.1;
+                    (g.min + f.as_dvec2() * g.cell * DVec2::new(g.n[0] as f64, g.n[1] as f64))
+                        .as_vec2()
+                })
+                .collect();
+            points.extend(b.iter().take(200).flat_map(|b| {
+                (0..BLOCK).flat_map(move |k| {
+                    [
+                        Vec2::new(b.lo_u[k], b.lo_v[k]),
+                        Vec2::new(b.hi_u[k], b.hi_v[k]),
+                    ]
+                })
+            }));
+            for &r in &points {
+                for chunk in b.chunks(32) {
+                    holds_all(chunk, r, &mut out);
+                    for (blk, &m) in chunk.iter().zip(&out) {
+                        assert_eq!(m, blk.holds(r), "axis {} at {r:?}", g.axis);
+                    }
+                }
+            }
+            assert!(
+                b.iter()
+                    .any(|blk| blk.holds(Vec2::new(blk.lo_u[0], blk.lo_v[0])) & 1 == 1)
+            );
         }
     }
 
