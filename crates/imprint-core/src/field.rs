@@ -218,7 +218,7 @@ impl DistanceField {
     /// `Closest` field). Computed in parallel on first use and kept, so a field read by many
     /// substeps, frames or consumers pays once. Change no cell of a field after calling it.
     ///
-    /// The triangles' closest points go eight at a time ([`Batch`], the scalar function's
+    /// The triangles' closest points go a batch at a time ([`Batch`], the scalar function's
     /// bits); given a spare buffer ([`LazyCells::built`]), only the rows' band spans are
     /// written. Either way the cells are the same bits.
     pub fn cells(&self) -> &[Vec4] {

@@ -4,7 +4,7 @@
 //! - [`mesh_formats`]: [`load_mesh`], any supported mesh file (OBJ, PLY, STL, glTF) by content;
 //! - [`grid`]: the uniform cell grid ([`GridSpec`]) and dense 3D arrays ([`Grid3`]);
 //! - [`geom`]: bounding boxes, closest point on a triangle, triangle/box overlap;
-//! - [`closest`]: closest points on triangles eight pairs at a time, the scalar function's bits;
+//! - [`closest`]: closest points on triangles 32 pairs at a time, the scalar function's bits;
 //! - [`bvh`]: an exact closest-point query on a mesh, the reference every error is measured against;
 //! - [`camera`], [`raster`]: cameras and the CPU depth rasteriser (`DepthMap`), the reference for
 //!   the depth-buffer methods (draping, snow, ground contact);

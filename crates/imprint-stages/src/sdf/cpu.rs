@@ -14,7 +14,7 @@
 //! keeps point distances, as published.
 //!
 //! Speed: the splat's rows are written eight cells at a time (AVX2 where the CPU has it), and
-//! the refinement takes eight band cells at a time, each lane one cell against its seven
+//! the refinement takes band cells a batch at a time, each lane one cell against its seven
 //! candidates in turn ([`imprint_core::closest`]): no per-cell removal of repeated
 //! candidates (five in seven differ, and the branches cost more than the repeats), no
 //! scatter of results. Both give the scalar code's bits, so the field is the same.

@@ -8,7 +8,7 @@
 //! triangle index), and the cell keeps the smallest, which does not depend on the order the
 //! pairs arrive in. A slab's keys (128² cells × 4 layers × 8 bytes = 512 KiB at 128³) stay in
 //! cache while it is worked on; one shared grid-sized array updated with atomic minima missed
-//! the cache on nearly every proposal. The closest points are computed eight pairs at a time
+//! the cache on nearly every proposal. The closest points are computed a batch at a time
 //! ([`imprint_core::closest`], the scalar function's bits). The same task then lists its
 //! surface cells in increasing index from its occupancy bits and resets what it touched, so a
 //! `Voxelizer` kept across frames costs time in proportion to the surface, not the grid, and
