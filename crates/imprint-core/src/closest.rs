@@ -26,7 +26,7 @@ type Lanes = [f32; LANES];
 
 /// [`LANES`] (point, triangle) pairs in structure-of-arrays form, set lane by lane and
 /// evaluated together. A caller may keep lanes across evaluations: the field's refinement
-/// keeps eight cells and changes only their triangles.
+/// keeps a group of cells and changes only their triangles.
 #[derive(Clone, Default)]
 pub struct Pairs {
     p: [Lanes; 3],

@@ -1046,7 +1046,7 @@ mod tests {
     fn crossings_together_are_crossing_each() {
         let t = InsideTest::rays_only(&torus(0.5, 0.2, 60, 24));
         let mut rng = Rng(5);
-        let (mut hits, mut on_edges) = (0, 0);
+        let (mut hits, mut on_corners) = (0, 0);
         for g in &t.axes {
             for (i, four) in g.tris.chunks(CROSS_LANES).enumerate().take(800) {
                 let tris: Vec<Option<&Tri2>> = four.iter().take(1 + i % 4).map(Some).collect();
@@ -1066,7 +1066,7 @@ mod tests {
                         if let Some(want) = want {
                             assert_eq!(w[l].to_bits(), want.to_bits());
                             hits += 1;
-                            on_edges += (q == corner) as usize;
+                            on_corners += (q == corner) as usize;
                         }
                     }
                     assert_eq!(mask >> tris.len(), 0);
@@ -1074,8 +1074,8 @@ mod tests {
             }
         }
         assert!(
-            hits > 2000 && on_edges > 100,
-            "{hits} hits, {on_edges} on corners"
+            hits > 2000 && on_corners > 100,
+            "{hits} hits, {on_corners} on corners"
         );
     }
 

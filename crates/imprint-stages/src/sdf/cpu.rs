@@ -325,7 +325,7 @@ fn refine_to_faces(
             let flush = |group: &mut Group, dist: &mut [f32], owner: &mut [u32]| {
                 let (d2, n) = grid.best_faces(group, faces);
                 for l in 0..group.len {
-                    let k = group.cells.index[l] as usize - base;
+                    let k = group.cells.index[l] - base;
                     (dist[k], owner[k]) = (d2[l].sqrt() * cell, n[l]);
                 }
                 group.len = 0;
@@ -376,7 +376,7 @@ struct Group {
 /// in the grid (bit s: `Neighbours::steps[s]`).
 #[derive(Default)]
 struct Cells {
-    index: [u32; LANES],
+    index: [usize; LANES],
     own: [u32; LANES],
     inside: [u8; LANES],
 }
@@ -407,7 +407,7 @@ impl<'a> Neighbours<'a> {
         group
             .pairs
             .set_point(l, Vec3::new(x as f32, y as f32, z as f32));
-        group.cells.index[l] = i as u32;
+        group.cells.index[l] = i;
         group.cells.own[l] = n;
         group.cells.inside[l] = (x > 0) as u8
             | ((x + 1 < nx) as u8) << 1
@@ -425,7 +425,7 @@ impl<'a> Neighbours<'a> {
     fn neighbour_cands(&self, cells: &Cells, s: usize, step: isize) -> [u32; LANES] {
         std::array::from_fn(|l| {
             let n = if cells.inside[l] >> s & 1 == 1 {
-                self.nearest[(cells.index[l] as isize + step) as usize]
+                self.nearest[cells.index[l].wrapping_add_signed(step)]
             } else {
                 DistanceField::FAR
             };
@@ -720,7 +720,8 @@ mod tests {
     /// squared distance, then smallest point) of its splatted nearest point's triangle and
     /// its six in-grid neighbours' (a lane that read another lane's candidates, a wrong step
     /// or a padding lane written back would break it). The grid hugs the torus, so the band
-    /// reaches every face of the grid, and rows end in partial groups of eight.
+    /// reaches every face of the grid; groups run across rows, and each slab's last is
+    /// partial.
     #[test]
     fn refinement_is_the_best_of_seven_candidates() {
         let mesh = torus(0.5, 0.2, 64, 24);
