@@ -270,8 +270,7 @@ impl InsideTest {
     /// [`InsideTest::ray_crossings_kept`].
     pub fn exact_keeping(&self, p: Vec3, lines: &mut Lines) -> bool {
         lines.at = p;
-        let mut votes = 0;
-        for (g, kept) in self.axes.iter().zip(&mut lines.w) {
+        vote(self.axes.iter().zip(&mut lines.w).map(|(g, kept)| {
             kept.clear();
             let pw = p[g.axis] as f64;
             let mut odd = false;
@@ -280,48 +279,35 @@ impl InsideTest {
                 odd ^= w > pw;
                 w != pw
             });
-            if all == Some(false) {
-                return false;
-            }
-            votes += odd as u32;
-        }
-        votes >= 2
+            (all != Some(false)).then_some(odd)
+        }))
     }
 
     /// [`InsideTest::exact`] at `q`, reading the ray along an axis from `lines` where `q` lies
     /// on that axis's line through the point they were kept for (its other two coordinates
-    /// the same): a point pushed along an axis needs two walks, not three.
+    /// the same): a point pushed along an axis needs one or two walks, not three.
     pub fn exact_on_lines(&self, q: Vec3, lines: &Lines) -> bool {
-        let mut votes = 0;
-        for g in &self.axes {
-            let on_line =
-                g.uv.iter()
-                    .all(|&a| q[a].to_bits() == lines.at[a].to_bits());
-            let odd = if on_line {
-                let qw = q[g.axis] as f64;
-                let w = &lines.w[g.axis];
-                (!w.contains(&qw)).then(|| w.iter().filter(|&&w| w > qw).count() % 2 == 1)
-            } else {
-                g.odd_crossings(q)
-            };
-            match odd {
-                None => return false,
-                Some(odd) => votes += odd as u32,
+        let on_line = |g: &AxisGrid| {
+            g.uv.iter()
+                .all(|&a| q[a].to_bits() == lines.at[a].to_bits())
+        };
+        // From the first axis q is on the line of, in turn (`leaves_cleanly` asks the next
+        // axis at a point on the same line just before: its cell is still in the cache).
+        let first = (0..3).find(|&a| on_line(&self.axes[a])).unwrap_or(0);
+        vote((0..3).map(|k| (first + k) % 3).map(|a| {
+            let g = &self.axes[a];
+            if !on_line(g) {
+                return g.odd_crossings(q);
             }
-        }
-        votes >= 2
+            let qw = q[a] as f64;
+            let w = &lines.w[a];
+            (!w.contains(&qw)).then(|| w.iter().filter(|&&w| w > qw).count() % 2 == 1)
+        }))
     }
 
     /// [`InsideTest::inside`] by the three rays, without the voxel grid.
     pub fn exact(&self, p: Vec3) -> bool {
-        let mut votes = 0;
-        for g in &self.axes {
-            match g.odd_crossings(p) {
-                None => return false,
-                Some(odd) => votes += odd as u32,
-            }
-        }
-        votes >= 2
+        vote(self.axes.iter().map(|g| g.odd_crossings(p)))
     }
 
     /// [`InsideTest::exact`] at a point where the ray along `axis` is known to cross the
@@ -332,6 +318,22 @@ impl InsideTest {
             .into_iter()
             .all(|k| self.axes[(axis + k) % 3].odd_crossings(p) == Some(true))
     }
+}
+
+/// The majority of the rays' parities (`Some(true)`: odd), drawn one ray at a time: a ray
+/// on the surface (`None`) makes the point outside, and so do two even rays, whatever the
+/// third says, which is then not asked (a walk saved for most points outside).
+fn vote(rays: impl IntoIterator<Item = Option<bool>>) -> bool {
+    let (mut odd, mut even) = (0, 0);
+    for ray in rays {
+        match ray {
+            None => return false,
+            Some(true) => odd += 1,
+            Some(false) if even == 1 => return false,
+            Some(false) => even += 1,
+        }
+    }
+    odd >= 2
 }
 
 /// The crossings of the three axis lines through one point (axis coordinates, both ways from
@@ -1077,6 +1079,50 @@ mod tests {
             hits > 2000 && on_corners > 100,
             "{hits} hits, {on_corners} on corners"
         );
+    }
+
+    /// The vote that stops at two even rays answers as all three rays asked: `exact`,
+    /// `exact_keeping` and `exact_on_lines` (at points moved along an axis, on the surface
+    /// and off it) against the plain majority, where a ray on the surface makes it outside.
+    #[test]
+    fn the_short_vote_is_the_majority_of_three() {
+        let all = [None, Some(false), Some(true)];
+        for a in all {
+            for b in all {
+                for c in all {
+                    let plain = [a, b, c].iter().all(Option::is_some)
+                        && [a, b, c].iter().filter(|&&r| r == Some(true)).count() >= 2;
+                    assert_eq!(vote([a, b, c]), plain, "{a:?} {b:?} {c:?}");
+                }
+            }
+        }
+        let mesh = torus(0.5, 0.2, 60, 24);
+        let t = InsideTest::rays_only(&mesh);
+        let majority = |p: Vec3| {
+            let rays = t.axes.each_ref().map(|g| g.odd_crossings(p));
+            rays.iter().all(Option::is_some) && rays.iter().flatten().filter(|&&o| o).count() >= 2
+        };
+        let mut rng = Rng(11);
+        let mut lines = Lines::default();
+        let (mut inside, mut moved_in) = (0, 0);
+        for k in 0..6_000 {
+            let p = match k % 3 {
+                0 => (rng.vec() - 0.5) * 1.6,
+                1 => point_on(&mesh, &mut rng),
+                _ => mesh.positions[k % mesh.positions.len()],
+            };
+            assert_eq!(t.exact(p), majority(p), "{p:?}");
+            assert_eq!(t.exact_keeping(p, &mut lines), majority(p), "{p:?}");
+            inside += majority(p) as usize;
+            if majority(p) {
+                let mut q = p;
+                q[k % 3] += (rng.next() - 0.5) * 0.2;
+                assert_eq!(t.exact_on_lines(q, &lines), majority(q), "{p:?} to {q:?}");
+                moved_in += majority(q) as usize;
+            }
+        }
+        // Both answers are met often enough for the comparisons to mean something.
+        assert!(inside > 500 && moved_in > 200, "{inside} {moved_in}");
     }
 
     #[test]
