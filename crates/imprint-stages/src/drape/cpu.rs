@@ -256,6 +256,32 @@ fn prepare(body: &Mesh, params: &DrapeParams, mut rasterize: impl Rasterize) -> 
     Ok(Prepared { views, test, texel })
 }
 
+/// What the fit does with one vertex: `None` = outside (untouched); `Some(Ok((new, inside
+/// there)))` = resolved; `Some(Err(()))` = inside and unresolved by the views.
+type Outcome = Option<std::result::Result<(Vec3, bool), ()>>;
+
+/// Vertices the fit takes together (the inside test's rays go axis by axis over them).
+const BATCH: usize = 128;
+
+/// A fit worker's buffers for one batch.
+struct Batch {
+    crossings: Vec<f64>,
+    points: Vec<Vec3>,
+    lines: Vec<Lines>,
+    inside: Vec<bool>,
+}
+
+impl Batch {
+    fn new(n: usize) -> Self {
+        Batch {
+            crossings: Vec::new(),
+            points: Vec::with_capacity(n),
+            lines: vec![Lines::default(); n],
+            inside: vec![false; n],
+        }
+    }
+}
+
 /// The pushes of the garment's vertices out of the prepared body (`None`: nothing to fit:
 /// no garment, or a body without triangles or box).
 fn fit(
@@ -275,38 +301,50 @@ fn fit(
     let texel = *texel;
     let offset = params.offset;
 
-    // Per vertex: None = outside (untouched); Some(Ok((new, inside there))) = resolved;
-    // Some(Err(())) = inside and unresolved by the views.
-    // Visited in the test's locality order (the answers do not depend on the order).
+    // Visited in the test's locality order (the answers do not depend on the order), a batch
+    // at a time: the inside test asks the batch's rays axis by axis.
     let order = test.locality_order(garment);
-    let found: Vec<Option<std::result::Result<(Vec3, bool), ()>>> = order
-        .par_iter()
-        .with_min_len(256)
+    let found: Vec<Vec<Outcome>> = order
+        .par_chunks(BATCH)
         .map_init(
-            || (Vec::new(), Lines::default()),
-            |(crossings, lines), &i| {
-                let p = garment[i as usize];
+            || Batch::new(BATCH),
+            |Batch {
+                 crossings,
+                 points,
+                 lines,
+                 inside,
+             },
+             chunk| {
+                points.clear();
+                points.extend(chunk.iter().map(|&i| garment[i as usize]));
+                let n = points.len();
                 // The drape's test has no far-cell grid: `inside` is `exact`, here keeping the
                 // axis lines through p for the push's check and the self-check of its end.
-                if !test.exact_keeping(p, lines) {
-                    return None;
-                }
-                let best = views
-                    .iter()
-                    .filter_map(|v| v.push(p, offset))
-                    .min_by(|a, b| a.length.total_cmp(&b.length));
-                Some(match best {
-                    Some(push) if leaves_cleanly(test, p, push, texel, crossings, Some(lines)) => {
-                        let q = p + push.dir * push.length;
-                        Ok((q, test.exact_on_lines(q, lines)))
-                    }
-                    _ => Err(()),
+                test.exact_keeping(points, &mut lines[..n], &mut inside[..n]);
+                let each = points.iter().zip(&lines[..n]).zip(&inside[..n]);
+                each.map(|((&p, lines), &inside)| {
+                    inside.then(|| {
+                        let best = views
+                            .iter()
+                            .filter_map(|v| v.push(p, offset))
+                            .min_by(|a, b| a.length.total_cmp(&b.length));
+                        match best {
+                            Some(push)
+                                if leaves_cleanly(test, p, push, texel, crossings, Some(lines)) =>
+                            {
+                                let q = p + push.dir * push.length;
+                                Ok((q, test.exact_on_lines(q, lines)))
+                            }
+                            _ => Err(()),
+                        }
+                    })
                 })
+                .collect()
             },
         )
         .collect();
     let mut outcome = vec![None; garment.len()];
-    for (&i, o) in order.iter().zip(found) {
+    for (&i, o) in order.iter().zip(found.into_iter().flatten()) {
         outcome[i as usize] = o;
     }
 

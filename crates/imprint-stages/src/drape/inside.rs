@@ -290,22 +290,35 @@ impl InsideTest {
             .then_some(ray.odd)
     }
 
-    /// [`InsideTest::exact`] at `p`, keeping the crossings of the three axis lines through
-    /// `p` in `lines` (complete when `p` is inside) for [`InsideTest::exact_on_lines`] and
-    /// [`InsideTest::ray_crossings_kept`].
-    pub fn exact_keeping(&self, p: Vec3, lines: &mut Lines) -> bool {
-        lines.at = p;
-        vote(self.axes.iter().zip(&mut lines.w).map(|(g, kept)| {
-            kept.clear();
-            let pw = p[g.axis] as f64;
-            let mut odd = false;
-            let all = g.each_hit(p, |w| {
-                kept.push(w);
-                odd ^= w > pw;
-                w != pw
-            });
-            (all != Some(false)).then_some(odd)
-        }))
+    /// [`InsideTest::exact`] at each of `points` into `inside`, keeping the crossings of the
+    /// three axis lines through each point in its `lines` (complete where it is inside) for
+    /// [`InsideTest::exact_on_lines`] and [`InsideTest::ray_crossings_kept`]. Ray by ray:
+    /// every point's ray along x, then along y, then along z, so that points near each other
+    /// (see [`InsideTest::locality_order`]) walk the same cells one after the other, from the
+    /// cache (point by point, three grids' cells took turns in it).
+    pub fn exact_keeping(&self, points: &[Vec3], lines: &mut [Lines], inside: &mut [bool]) {
+        let mut votes = vec![Vote::default(); points.len()];
+        for g in &self.axes {
+            for ((&p, lines), vote) in points.iter().zip(lines.iter_mut()).zip(&mut votes) {
+                if vote.answer.is_some() {
+                    continue;
+                }
+                lines.at = p;
+                let kept = &mut lines.w[g.axis];
+                kept.clear();
+                let pw = p[g.axis] as f64;
+                let mut odd = false;
+                let all = g.each_hit(p, |w| {
+                    kept.push(w);
+                    odd ^= w > pw;
+                    w != pw
+                });
+                vote.add((all != Some(false)).then_some(odd));
+            }
+        }
+        for (inside, vote) in inside.iter_mut().zip(&votes) {
+            *inside = vote.answer == Some(true);
+        }
     }
 
     /// [`InsideTest::exact`] at `q`, reading the ray along an axis from `lines` where `q` lies
@@ -349,21 +362,43 @@ impl InsideTest {
 /// on the surface (`None`) makes the point outside, and so do two even rays, whatever the
 /// third says, which is then not asked (a walk saved for most points outside).
 fn vote(rays: impl IntoIterator<Item = Option<bool>>) -> bool {
-    let (mut odd, mut even) = (0, 0);
+    let mut vote = Vote::default();
     for ray in rays {
-        match ray {
-            None => return false,
-            Some(true) => odd += 1,
-            Some(false) if even == 1 => return false,
-            Some(false) => even += 1,
+        if let Some(answer) = vote.add(ray) {
+            return answer;
         }
     }
-    odd >= 2
+    unreachable!("three rays decide")
+}
+
+/// The count of [`vote`], ray by ray.
+#[derive(Clone, Copy, Default)]
+struct Vote {
+    odd: u8,
+    even: u8,
+    /// Inside or not, once decided.
+    answer: Option<bool>,
+}
+
+impl Vote {
+    /// Counts one more ray; the answer once it is decided.
+    fn add(&mut self, ray: Option<bool>) -> Option<bool> {
+        match ray {
+            None => self.answer = Some(false),
+            Some(false) if self.even == 1 => self.answer = Some(false),
+            Some(false) => self.even += 1,
+            Some(true) => self.odd += 1,
+        }
+        if self.odd + self.even == 3 {
+            self.answer = Some(self.odd >= 2);
+        }
+        self.answer
+    }
 }
 
 /// The crossings of the three axis lines through one point (axis coordinates, both ways from
 /// it, in list order), kept by [`InsideTest::exact_keeping`].
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Lines {
     at: Vec3,
     w: [Vec<f64>; 3],
@@ -1167,21 +1202,27 @@ mod tests {
             rays.iter().all(Option::is_some) && rays.iter().flatten().filter(|&&o| o).count() >= 2
         };
         let mut rng = Rng(11);
-        let mut lines = Lines::default();
-        let (mut inside, mut moved_in) = (0, 0);
-        for k in 0..6_000 {
-            let p = match k % 3 {
+        let points: Vec<Vec3> = (0..6_000)
+            .map(|k| match k % 3 {
                 0 => (rng.vec() - 0.5) * 1.6,
                 1 => point_on(&mesh, &mut rng),
                 _ => mesh.positions[k % mesh.positions.len()],
-            };
+            })
+            .collect();
+        // All points in one batch: the points decided after two rays sit among those that
+        // need the third.
+        let mut lines = vec![Lines::default(); points.len()];
+        let mut kept = vec![false; points.len()];
+        t.exact_keeping(&points, &mut lines, &mut kept);
+        let (mut inside, mut moved_in) = (0, 0);
+        for (k, (&p, lines)) in points.iter().zip(&lines).enumerate() {
             assert_eq!(t.exact(p), majority(p), "{p:?}");
-            assert_eq!(t.exact_keeping(p, &mut lines), majority(p), "{p:?}");
+            assert_eq!(kept[k], majority(p), "{p:?}");
             inside += majority(p) as usize;
             if majority(p) {
                 let mut q = p;
                 q[k % 3] += (rng.next() - 0.5) * 0.2;
-                assert_eq!(t.exact_on_lines(q, &lines), majority(q), "{p:?} to {q:?}");
+                assert_eq!(t.exact_on_lines(q, lines), majority(q), "{p:?} to {q:?}");
                 moved_in += majority(q) as usize;
             }
         }
