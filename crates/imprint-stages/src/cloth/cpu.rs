@@ -16,7 +16,7 @@ use super::contact_lanes::{self, Fields, Touch};
 use super::lanes::{Blocks, LANES, Lane, Lanes};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
-use super::sampler::FieldView;
+use super::sampler::{Corners, FieldView};
 use super::shape::ClothShape;
 use super::springs::{
     Faces, Hinges, LinkQuad, Links, SpringLaw, enumerate_springs, hinge_angle_gradient,
@@ -199,6 +199,10 @@ pub struct ClothSim {
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: Vec<Vec4>,
     side_fields: usize,
+    /// Per block of [`LANES`] particles and collider, the cells its end and start fields
+    /// were last read at (kept through a frame's substeps, whose fields do not change).
+    #[serde(skip)]
+    corners: Vec<[Corners; 2]>,
     stats: Vec<SubstepStats>,
     dt_prev: Option<f32>,
     first_energy: Option<f64>,
@@ -313,6 +317,7 @@ impl ClothSim {
             side: vec![Vec4::ZERO; n],
             backup_side: Vec::new(),
             side_fields: 0,
+            corners: Vec::new(),
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
             dt_prev: None,
             first_energy: None,
@@ -585,6 +590,10 @@ impl ClothSim {
         self.lanes.resize(n);
         self.lanes_prev.resize(n);
         self.lanes_next.resize(n);
+        // Whole chunks of blocks per collider; nothing held from the last frame's fields.
+        let corners = n.div_ceil(CHUNK) * (CHUNK / LANES) * colliders.len().max(1);
+        self.corners.resize_with(corners, Default::default);
+        self.corners.iter_mut().flatten().for_each(Corners::forget);
         self.inv_mass.clear();
         self.inv_mass.resize(n.div_ceil(LANES) * LANES, 0.0);
         for (i, (p, q)) in self.state.pos.iter().zip(&self.state.prev).enumerate() {
@@ -698,11 +707,13 @@ impl ClothSim {
             .zip(out.y.par_chunks_mut(CHUNK))
             .zip(out.z.par_chunks_mut(CHUNK))
             .zip(self.side.par_chunks_mut(CHUNK * nf))
+            .zip(self.corners.par_chunks_mut(CHUNK / LANES * nf))
             .zip(self.stats.par_iter_mut())
             .enumerate()
-            .for_each(|(c, ((((x, y), z), side), stats))| {
+            .for_each(|(c, (((((x, y), z), side), corners), stats))| {
                 let mut st = SubstepStats::new();
-                update_chunk(c * CHUNK, &ctx, [x, y, z], side, &mut st);
+                let memory = Memory { side, corners };
+                update_chunk(c * CHUNK, &ctx, [x, y, z], memory, &mut st);
                 *stats = st;
             });
         let mut total = SubstepStats::new();
@@ -977,6 +988,13 @@ impl ClothSim {
     }
 }
 
+/// What a chunk of particles keeps between substeps: per particle and collider its side
+/// memory, per block and collider the cells last read ([`Corners`]).
+struct Memory<'a> {
+    side: &'a mut [Vec4],
+    corners: &'a mut [[Corners; 2]],
+}
+
 /// One chunk of particles (`base..`, whole blocks of [`LANES`]) through one substep, their
 /// next positions written into `out` (the chunk's part of the next positions, by axis). In
 /// the AVX2 build where the processor has it (decided once per process, as in
@@ -986,15 +1004,15 @@ fn update_chunk(
     base: usize,
     ctx: &Substep,
     out: [&mut [f32]; 3],
-    side: &mut [Vec4],
+    memory: Memory,
     st: &mut SubstepStats,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { update_chunk_avx2(base, ctx, out, side, st) };
+        return unsafe { update_chunk_avx2(base, ctx, out, memory, st) };
     }
-    update_blocks(base, ctx, out, side, st)
+    update_blocks(base, ctx, out, memory, st)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1003,10 +1021,10 @@ unsafe fn update_chunk_avx2(
     base: usize,
     ctx: &Substep,
     out: [&mut [f32]; 3],
-    side: &mut [Vec4],
+    memory: Memory,
     st: &mut SubstepStats,
 ) {
-    update_blocks(base, ctx, out, side, st)
+    update_blocks(base, ctx, out, memory, st)
 }
 
 #[inline(always)]
@@ -1014,12 +1032,12 @@ fn update_blocks(
     base: usize,
     ctx: &Substep,
     [ox, oy, oz]: [&mut [f32]; 3],
-    side: &mut [Vec4],
+    mut memory: Memory,
     st: &mut SubstepStats,
 ) {
     let blocks = ox.chunks_exact_mut(LANES).zip(oy.chunks_exact_mut(LANES));
     for (b, ((ox, oy), oz)) in blocks.zip(oz.chunks_exact_mut(LANES)).enumerate() {
-        let x = step_block(base + b * LANES, ctx, side, st);
+        let x = step_block(base + b * LANES, ctx, &mut memory, st);
         ox.copy_from_slice(&x[0]);
         oy.copy_from_slice(&x[1]);
         oz.copy_from_slice(&x[2]);
@@ -1029,9 +1047,14 @@ fn update_blocks(
 /// The next positions of particles `first..first + LANES` (lanes past the last particle:
 /// zero), in the order one particle's update takes: springs (and hinges), H eq. 10 (pins
 /// to their targets), the colliders in order, the depth maps, the ground; then the stats.
-/// `side` is the chunk's side memory.
+/// `memory` is the chunk's.
 #[inline(always)]
-fn step_block(first: usize, ctx: &Substep, side: &mut [Vec4], st: &mut SubstepStats) -> [Lane; 3] {
+fn step_block(
+    first: usize,
+    ctx: &Substep,
+    memory: &mut Memory,
+    st: &mut SubstepStats,
+) -> [Lane; 3] {
     let count = ctx.n.saturating_sub(first).min(LANES);
     // Lanes that move freely: not pinned, not padding. (Loops, not `array::from_fn`, whose
     // closures are not inlined into the AVX2 build.)
@@ -1086,10 +1109,10 @@ fn step_block(first: usize, ctx: &Substep, side: &mut [Vec4], st: &mut SubstepSt
     let k0 = first % CHUNK;
     for (c, collider) in ctx.colliders.iter().enumerate() {
         if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
-            touch_block(ctx, collider, &x, &mut xn, &live, side, k0, c, st);
+            touch_block(ctx, collider, &x, &mut xn, &live, memory, k0, c, st);
         } else {
             for m in (0..count).filter(|&m| live[m]) {
-                let mem = &mut side[(k0 + m) * ctx.nf() + c];
+                let mem = &mut memory.side[(k0 + m) * ctx.nf() + c];
                 let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
                 if let Some(sample) =
                     contact::signed_sample(collider, p, from, ctx.s, *mem, ctx.eps)
@@ -1207,8 +1230,8 @@ fn block_stats(
 }
 
 /// The contact of a block's live lanes (new positions `x`, from `from`) with collider `c`,
-/// read from unsigned fields ([`contact_lanes`]); `side` holds the chunk's memories from
-/// lane 0 at `k0`.
+/// read from unsigned fields ([`contact_lanes`]); `memory` is the chunk's, lane 0 its
+/// particle `k0`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn touch_block(
@@ -1217,7 +1240,7 @@ fn touch_block(
     from: &[Lane; 3],
     x: &mut [Lane; 3],
     live: &[bool; LANES],
-    side: &mut [Vec4],
+    memory: &mut Memory,
     k0: usize,
     c: usize,
     st: &mut SubstepStats,
@@ -1230,7 +1253,7 @@ fn touch_block(
         ..Default::default()
     };
     for m in (0..LANES).filter(|&m| live[m]) {
-        let mem = side[(k0 + m) * nf + c];
+        let mem = memory.side[(k0 + m) * nf + c];
         for a in 0..4 {
             t.side[a][m] = mem[a];
         }
@@ -1240,10 +1263,14 @@ fn touch_block(
         end: &collider.end,
         start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
-    let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction);
+    let corners = &mut memory.corners[k0 / LANES * nf + c];
+    let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction, corners);
+    // A lane indexes the results, the positions and the chunk's memories alike.
+    #[allow(clippy::needless_range_loop)]
     for m in 0..LANES {
         if r.remember[m] {
-            side[(k0 + m) * nf + c] = Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
+            memory.side[(k0 + m) * nf + c] =
+                Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
         }
         if r.hit[m] {
             (0..3).for_each(|a| x[a][m] = r.x[a][m]);

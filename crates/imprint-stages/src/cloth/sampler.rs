@@ -27,6 +27,35 @@ pub struct FieldView<'a> {
     dims: IVec3,
 }
 
+/// The eight cells around each of [`LANES`] particles as [`FieldView::sample_lanes`] last
+/// read them from one field, by component, corner and lane. A particle moves a fraction of a
+/// cell in a substep, so most reads find their cells here and load none from the field (a
+/// 128³ field's cells are 32 MiB, read at scattered places, and moving them into lanes cost
+/// a store per value). Good for one field while it does not change: [`Corners::forget`]
+/// before a read of another, or of the same after it changed.
+#[derive(Clone, Debug)]
+pub struct Corners {
+    /// Per lane, the index of the cell the lane's corners start at; `usize::MAX`: none held.
+    base: [usize; LANES],
+    cells: [[[f32; LANES]; 8]; 4],
+}
+
+impl Default for Corners {
+    fn default() -> Self {
+        Corners {
+            base: [usize::MAX; LANES],
+            cells: [[[0.0; LANES]; 8]; 4],
+        }
+    }
+}
+
+impl Corners {
+    /// Drops what is held: the next read loads every lane's cells.
+    pub fn forget(&mut self) {
+        self.base = [usize::MAX; LANES];
+    }
+}
+
 /// A sample and, for a signed field, the blend of the cells' signed distances
 /// ([`DistanceField::side`]): negative inside.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -58,32 +87,37 @@ impl<'a> FieldView<'a> {
     /// which vectorise); one particle at a time, each read was a chain of dependent steps (a
     /// division, the cell's index, its loads, eight additions in order, a square root) that
     /// left the processor waiting. Lanes whose cells are not all inside the grid take
-    /// [`FieldView::sample`].
+    /// [`FieldView::sample`]. `corners` holds the lanes' cells from the last read of this
+    /// field (see [`Corners`]): a lane still in the same cell loads nothing.
     #[inline(always)]
     #[allow(clippy::type_complexity)]
     pub fn sample_lanes(
         &self,
         p: &[[f32; LANES]; 3],
+        corners: &mut Corners,
     ) -> ([f32; LANES], [[f32; LANES]; 3], [bool; LANES]) {
         let (b, t, inner) = self.cell_lanes(p);
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
-        // The corners' cells by component, corner and lane (structure of arrays, so that the
-        // blends below run across the lanes).
-        let mut corners = [[[0.0f32; LANES]; 8]; 4];
         let far = -self.field.far_value();
         for m in (0..LANES).filter(|&m| inner[m]) {
             let base = [b[0][m] as usize, b[1][m] as usize, b[2][m] as usize];
+            let i0 = base[0] + nx * base[1] + nxy * base[2];
+            if corners.base[m] == i0 {
+                continue;
+            }
+            corners.base[m] = i0;
+            let cells = &mut corners.cells;
             if self.far_bricks.all_far(base) {
                 // The cells are (0, 0, 0, -far): the values, not loaded.
-                for w in &mut corners[3] {
-                    w[m] = far;
+                for (a, comp) in cells.iter_mut().enumerate() {
+                    let v = if a == 3 { far } else { 0.0 };
+                    comp.iter_mut().for_each(|corner| corner[m] = v);
                 }
                 continue;
             }
-            let i0 = base[0] + nx * base[1] + nxy * base[2];
             for k in 0..8 {
                 let c = self.cells[i0 + (k & 1) + nx * ((k >> 1) & 1) + nxy * (k >> 2)];
-                for (a, comp) in corners.iter_mut().enumerate() {
+                for (a, comp) in cells.iter_mut().enumerate() {
                     comp[k][m] = c[a];
                 }
             }
@@ -91,7 +125,7 @@ impl<'a> FieldView<'a> {
         // The field's weights in its order, and the blends, corner after corner.
         let (mut v, mut dist) = ([[0.0f32; LANES]; 3], [0.0f32; LANES]);
         let mut far = [false; LANES];
-        let [cx, cy, cz, cw] = &corners;
+        let [cx, cy, cz, cw] = &corners.cells;
         for k in 0..8 {
             for m in 0..LANES {
                 let wx = if k & 1 == 1 { t[0][m] } else { 1.0 - t[0][m] };
