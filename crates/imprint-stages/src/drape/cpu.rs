@@ -65,7 +65,7 @@ fn behind(map: &DepthMap, look: &Lookup, p: Vec3) -> Option<f32> {
     }
     // Read from the depths alone: an uncovered texel holds +∞ (`DepthMap`'s contract), so it
     // has nothing in front of the point and is never the nearest. (Reading the coverage too
-    // doubled the cache lines a vertex's six lookups touch.)
+    // doubled the cache lines a lookup touches.)
     let at = |i: u32, j: u32| map.depth[map.index(i, j)];
     // `as` truncates, the floor of these non-negative coordinates (and 0 for those below,
     // as `max(0.0)` would make it); `floor` is a library call on x86-64 without SSE4.1.
@@ -323,21 +323,7 @@ fn fit(
                 test.exact_keeping(points, &mut lines[..n], &mut inside[..n]);
                 let each = points.iter().zip(&lines[..n]).zip(&inside[..n]);
                 each.map(|((&p, lines), &inside)| {
-                    inside.then(|| {
-                        let best = views
-                            .iter()
-                            .filter_map(|v| v.push(p, offset))
-                            .min_by(|a, b| a.length.total_cmp(&b.length));
-                        match best {
-                            Some(push)
-                                if leaves_cleanly(test, p, push, texel, crossings, Some(lines)) =>
-                            {
-                                let q = p + push.dir * push.length;
-                                Ok((q, test.exact_on_lines(q, lines)))
-                            }
-                            _ => Err(()),
-                        }
-                    })
+                    inside.then(|| push_out(test, views, p, lines, (offset, texel), crossings))
                 })
                 .collect()
             },
@@ -406,6 +392,29 @@ fn fit(
         .count();
     report.inside_after = report.unresolved + short;
     Ok(report)
+}
+
+/// The views' push of an inside vertex `p` (the shortest), when its path leaves the body
+/// cleanly: the pushed point and whether it is still inside; `lines` were kept at `p`.
+fn push_out(
+    test: &InsideTest,
+    views: &[View],
+    p: Vec3,
+    lines: &Lines,
+    (offset, texel): (f32, f32),
+    crossings: &mut Vec<f64>,
+) -> std::result::Result<(Vec3, bool), ()> {
+    let best = views
+        .iter()
+        .filter_map(|v| v.push(p, offset))
+        .min_by(|a, b| a.length.total_cmp(&b.length));
+    match best {
+        Some(push) if leaves_cleanly(test, p, push, texel, crossings, Some(lines)) => {
+            let q = p + push.dir * push.length;
+            Ok((q, test.exact_on_lines(q, lines)))
+        }
+        _ => Err(()),
+    }
 }
 
 fn apply(report: &mut DrapeReport, p: &mut Vec3, q: Vec3) {

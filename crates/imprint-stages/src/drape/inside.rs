@@ -683,20 +683,7 @@ impl AxisGrid {
             sorted[r as usize] = (boxes[t], spans[t]);
             tris2[r as usize] = kept[t];
         }
-        let mut blocks = vec![Block::EMPTY; starts[cells] as usize];
-        // The next free entry of each cell's list.
-        let mut fill: Vec<u32> = starts[..cells].iter().map(|&s| s * BLOCK as u32).collect();
-        for (t, &((lo, hi), [l, h])) in sorted.iter().enumerate() {
-            for j in l[1]..=h[1] {
-                for f in &mut fill[j * n[0] + l[0]..=j * n[0] + h[0]] {
-                    let (b, k) = (*f as usize / BLOCK, *f as usize % BLOCK);
-                    let b = &mut blocks[b];
-                    (b.lo_u[k], b.lo_v[k], b.hi_u[k], b.hi_v[k]) = (lo.x, lo.y, hi.x, hi.y);
-                    b.items[k] = t as u32;
-                    *f += 1;
-                }
-            }
-        }
+        let blocks = fill_blocks(&sorted, &starts, n);
         AxisGrid {
             axis: AXIS,
             uv,
@@ -912,6 +899,33 @@ fn crossings_avx(tris: &[Option<&Tri2>], q: DVec2) -> ([f64; CROSS_LANES], u32) 
 #[inline]
 fn grid(min: DVec2, cell: DVec2, x: Vec2) -> DVec2 {
     (x.as_dvec2() - min) / cell
+}
+
+/// The cells' lists (`starts`: each cell's first block), filled with the triangles' boxes in
+/// the sorted order (`sorted`: each triangle's box and the first and last cell it meets, in
+/// a grid of `n` cells); a list's last block is padded with empty boxes.
+#[allow(clippy::type_complexity)]
+fn fill_blocks(
+    sorted: &[((Vec2, Vec2), [[usize; 2]; 2])],
+    starts: &[u32],
+    n: [usize; 2],
+) -> Vec<Block> {
+    let cells = n[0] * n[1];
+    let mut blocks = vec![Block::EMPTY; starts[cells] as usize];
+    // The next free entry of each cell's list.
+    let mut fill: Vec<u32> = starts[..cells].iter().map(|&s| s * BLOCK as u32).collect();
+    for (t, &((lo, hi), [l, h])) in sorted.iter().enumerate() {
+        for j in l[1]..=h[1] {
+            for f in &mut fill[j * n[0] + l[0]..=j * n[0] + h[0]] {
+                let (b, k) = (*f as usize / BLOCK, *f as usize % BLOCK);
+                let b = &mut blocks[b];
+                (b.lo_u[k], b.lo_v[k], b.hi_u[k], b.hi_v[k]) = (lo.x, lo.y, hi.x, hi.y);
+                b.items[k] = t as u32;
+                *f += 1;
+            }
+        }
+    }
+    blocks
 }
 
 /// Each triangle's place in the order by the cell its box starts in (a counting sort:
