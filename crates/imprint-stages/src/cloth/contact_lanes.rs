@@ -90,45 +90,24 @@ type Signed = (bool, f32, [f32; 3]);
 
 #[inline(always)]
 fn touch_lanes(
-    Fields { end, start }: Fields,
+    f: Fields,
     t: &Touch,
     eps: f32,
     friction: f32,
-    [end_corners, start_corners]: &mut [Corners; 2],
+    corners: &mut [Corners; 2],
 ) -> Touched {
-    // Far from the body in every field: no lane has a sample (as below, where a read with no
-    // vector classifies as none), so none moves or remembers.
-    if end.lanes_far(&t.x) && start.is_none_or(|(f, _)| f.lanes_far(&t.x)) {
+    let Some(SignedLanes {
+        some,
+        distance,
+        outward,
+        miss,
+    }) = signed_lanes(f, t, eps, corners)
+    else {
         return Touched {
             x: t.x,
             ..Default::default()
         };
-    }
-    let (db, vb, ib) = end.sample_lanes(&t.x, end_corners);
-    let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
-    let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];
-    let reach = |m: usize| 2.0 * eps + length(each(|k| t.x[k][m] - t.from[k][m]));
-    // Each lane's sample read as signed, in straight loops over the lanes (which vectorise).
-    let (mut some, mut distance) = ([false; LANES], [0.0f32; LANES]);
-    let (mut outward, mut miss) = ([[0.0f32; 3]; LANES], [false; LANES]);
-    match start {
-        None => {
-            for m in 0..LANES {
-                (some[m], distance[m], outward[m]) =
-                    classify(db[m], lane(&vb, m), side(m), reach(m));
-            }
-        }
-        Some((start, s)) => {
-            let (da, va, ia) = start.sample_lanes(&t.x, start_corners);
-            let far = end.field.far_value();
-            for m in 0..LANES {
-                let (a, b) = ((da[m], lane(&va, m)), (db[m], lane(&vb, m)));
-                let ((p, d, o), band_miss) =
-                    blend(a, ia[m], b, ib[m], s, side(m), reach(m), far, eps);
-                (some[m], distance[m], outward[m], miss[m]) = (p, d, o, band_miss);
-            }
-        }
-    }
+    };
     let mut out = Touched::default();
     for m in 0..LANES {
         // `respond`: the memory, then a push to ε along the outward direction normalised
@@ -154,6 +133,117 @@ fn touch_lanes(
         out.inside[m] = hit & (d < 0.0);
         out.band_miss[m] = hit & miss[m];
         out.depth[m] = push;
+    }
+    out
+}
+
+/// The lanes' samples read as signed ([`super::contact::signed_sample`]'s bits): whether
+/// there is one, the signed distance, the outward direction, and whether a blend of two fields
+/// mixed a far one with a near one.
+struct SignedLanes {
+    some: [bool; LANES],
+    distance: Lanes,
+    outward: [[f32; 3]; LANES],
+    miss: [bool; LANES],
+}
+
+/// The body read at the lanes' new positions, as signed; `None` when every lane is far from
+/// it in every field (no lane has a sample, as a read with no vector classifies as none).
+// A lane indexes the samples and the outputs alike.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn signed_lanes(
+    Fields { end, start }: Fields,
+    t: &Touch,
+    eps: f32,
+    [end_corners, start_corners]: &mut [Corners; 2],
+) -> Option<SignedLanes> {
+    if end.lanes_far(&t.x) && start.is_none_or(|(f, _)| f.lanes_far(&t.x)) {
+        return None;
+    }
+    let (db, vb, ib) = end.sample_lanes(&t.x, end_corners);
+    let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
+    let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];
+    let reach = |m: usize| 2.0 * eps + length(each(|k| t.x[k][m] - t.from[k][m]));
+    // Each lane's sample read as signed, in straight loops over the lanes (which vectorise).
+    let mut out = SignedLanes {
+        some: [false; LANES],
+        distance: [0.0; LANES],
+        outward: [[0.0; 3]; LANES],
+        miss: [false; LANES],
+    };
+    match start {
+        None => {
+            for m in 0..LANES {
+                (out.some[m], out.distance[m], out.outward[m]) =
+                    classify(db[m], lane(&vb, m), side(m), reach(m));
+            }
+        }
+        Some((start, s)) => {
+            let (da, va, ia) = start.sample_lanes(&t.x, start_corners);
+            let far = end.field.far_value();
+            for m in 0..LANES {
+                let (a, b) = ((da[m], lane(&va, m)), (db[m], lane(&vb, m)));
+                let ((p, d, o), band_miss) =
+                    blend(a, ia[m], b, ib[m], s, side(m), reach(m), far, eps);
+                (out.some[m], out.distance[m], out.outward[m], out.miss[m]) = (p, d, o, band_miss);
+            }
+        }
+    }
+    Some(out)
+}
+
+/// The signed distance [`super::contact::signed_sample`] gives at each lane's position `x`
+/// with no motion (`from` = `x`), remembering `side` (xyz, w = 1 when known): what the check
+/// at a frame's end reads; `None` where there is no sample. `corners` as for [`touch`].
+#[inline]
+pub fn resting(
+    f: Fields,
+    x: &[Lanes; 3],
+    side: &[Lanes; 4],
+    eps: f32,
+    corners: &mut [Corners; 2],
+) -> [Option<f32>; LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { resting_avx2(f, x, side, eps, corners) };
+    }
+    resting_lanes(f, x, side, eps, corners)
+}
+
+/// [`resting_lanes`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn resting_avx2(
+    f: Fields,
+    x: &[Lanes; 3],
+    side: &[Lanes; 4],
+    eps: f32,
+    corners: &mut [Corners; 2],
+) -> [Option<f32>; LANES] {
+    resting_lanes(f, x, side, eps, corners)
+}
+
+#[inline(always)]
+fn resting_lanes(
+    f: Fields,
+    x: &[Lanes; 3],
+    side: &[Lanes; 4],
+    eps: f32,
+    corners: &mut [Corners; 2],
+) -> [Option<f32>; LANES] {
+    let t = Touch {
+        x: *x,
+        from: *x,
+        side: *side,
+        live: [true; LANES],
+    };
+    let mut out = [None; LANES];
+    if let Some(s) = signed_lanes(f, &t, eps, corners) {
+        for (m, out) in out.iter_mut().enumerate() {
+            *out = s.some[m].then_some(s.distance[m]);
+        }
     }
     out
 }
@@ -284,6 +374,26 @@ mod tests {
 
     /// Checks `lanes` against the per-particle sample and response of `collider` at frame
     /// fraction `s`; returns (hits, particles found inside, band misses).
+    /// [`resting`] gives `signed_sample`'s distance at each lane's position with no motion,
+    /// to the bit; returns how many lanes had a sample.
+    fn resting_as_scalar(
+        collider: &Collider,
+        fields: Fields,
+        s: f32,
+        t: &Touch,
+        eps: f32,
+        corners: &mut [Corners; 2],
+    ) -> u32 {
+        let got = resting(fields, &t.x, &t.side, eps, corners);
+        for (m, got) in got.iter().enumerate() {
+            let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
+            let side = Vec4::new(t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]);
+            let want = contact::signed_sample(collider, x, x, s, side, eps).map(|s| s.distance);
+            assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits), "{x}");
+        }
+        got.iter().flatten().count() as u32
+    }
+
     fn same_as_scalar(
         collider: &Collider,
         s: f32,
@@ -337,7 +447,7 @@ mod tests {
             span: (0.0, 1.0),
         };
         let mut rng = 0x9e3779b97f4a7c15u64;
-        let (mut hits, mut inside) = (0, 0);
+        let (mut hits, mut inside, mut resting_samples) = (0, 0, 0);
         // Kept across the rounds, as the cloth keeps it across substeps: most lanes of a
         // round's second read find their cells held, the next round's lanes seldom do.
         let mut kept: [Corners; 2] = Default::default();
@@ -367,10 +477,12 @@ mod tests {
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
                 (hits, inside) = (hits + h, inside + i);
+                resting_samples += resting_as_scalar(&collider, fields, 1.0, &t, eps, &mut kept);
             }
         }
         // The cases were met: contacts, and particles found across the surface.
         assert!(hits > 1000 && inside > 100, "{hits} hits, {inside} inside");
+        assert!(resting_samples > 10_000, "{resting_samples}");
     }
 
     /// The same for a body read from two fields blended in time (a sphere that grew and
@@ -389,7 +501,7 @@ mod tests {
             span: (0.0, 1.0),
         };
         let mut rng = 0x2545f4914f6cdd1du64;
-        let (mut hits, mut inside, mut misses) = (0, 0, 0);
+        let (mut hits, mut inside, mut misses, mut resting_samples) = (0, 0, 0, 0);
         let mut kept: [Corners; 2] = Default::default();
         for round in 0..4000 {
             let first = particles(&mut rng, r, round);
@@ -407,11 +519,12 @@ mod tests {
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
                 (hits, inside, misses) = (hits + h, inside + i, misses + b);
+                resting_samples += resting_as_scalar(&collider, fields, s, &t, eps, &mut kept);
             }
         }
         assert!(
-            hits > 1000 && inside > 100 && misses > 10,
-            "{hits}, {inside}, {misses}"
+            hits > 1000 && inside > 100 && misses > 10 && resting_samples > 10_000,
+            "{hits}, {inside}, {misses}, {resting_samples}"
         );
     }
 }

@@ -756,8 +756,10 @@ impl ClothSim {
             .into_par_iter()
             .map(|c| {
                 let mut part = FramePass::default();
-                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
-                    self.particle_pass(i, colliders, depth, &mut part);
+                let range = c * CHUNK..((c + 1) * CHUNK).min(n);
+                let residual = self.residual_contact(range.clone(), colliders);
+                for (i, worst) in range.zip(residual) {
+                    self.particle_pass(i, worst, depth, &mut part);
                 }
                 part
             })
@@ -772,10 +774,60 @@ impl ClothSim {
         total
     }
 
+    /// Per particle of `range`, how far it is inside ε of the colliders (ε minus the signed
+    /// distance, the largest over the colliders; −∞ for none), against the end-of-frame
+    /// fields: eight particles at a time where the fields are unsigned ([`contact_lanes`]),
+    /// one at a time where not.
+    fn residual_contact(&self, range: std::ops::Range<usize>, colliders: &[Collider]) -> Vec<f32> {
+        let (pos, eps) = (&self.state.pos, self.params.collision.epsilon);
+        let nf = colliders.len().max(1);
+        let mut worst = vec![f32::NEG_INFINITY; range.len()];
+        for (k, c) in colliders.iter().enumerate() {
+            if c.end.is_signed() || c.start.is_some_and(|f| f.is_signed()) {
+                for (i, worst) in range.clone().zip(&mut worst) {
+                    let (x, side) = (pos[i].truncate(), self.side[i * nf + k]);
+                    if let Some(s) = contact::signed_sample(c, x, x, 1.0, side, eps) {
+                        *worst = worst.max(eps - s.distance);
+                    }
+                }
+                continue;
+            }
+            let w = c.weight(1.0);
+            let mut corners: [Corners; 2] = Default::default();
+            let fields = Fields {
+                end: &c.end,
+                start: c.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
+            };
+            for (b, worst) in range.clone().step_by(LANES).zip(worst.chunks_mut(LANES)) {
+                // Lanes past the range repeat its first particle (their answers unused).
+                let (mut x, mut side) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 4]);
+                for m in 0..LANES {
+                    let i = if m < worst.len() { b + m } else { b };
+                    let mem = self.side[i * nf + k];
+                    for a in 0..4 {
+                        side[a][m] = mem[a];
+                    }
+                    for a in 0..3 {
+                        x[a][m] = pos[i][a];
+                    }
+                }
+                let found = contact_lanes::resting(fields, &x, &side, eps, &mut corners);
+                for (worst, d) in worst.iter_mut().zip(found) {
+                    if let Some(d) = d {
+                        *worst = worst.max(eps - d);
+                    }
+                }
+            }
+        }
+        worst
+    }
+
+    /// One particle's part of [`ClothSim::frame_pass`]; `worst` is its
+    /// [`ClothSim::residual_contact`].
     fn particle_pass(
         &self,
         i: usize,
-        colliders: &[Collider],
+        mut worst: f32,
         depth: &[DepthCollider],
         part: &mut FramePass,
     ) {
@@ -806,15 +858,8 @@ impl ClothSim {
         part.energy.kinetic += 0.5 * m * ((x - prev[i].truncate()) / dt).length_squared() as f64;
         let mid = 0.5 * (x + prev[i].truncate());
         part.energy.gravity -= m * self.params.gravity.dot(mid) as f64;
-        // Residual contact, against the end-of-frame fields.
+        // Residual contact, against the end-of-frame fields (the colliders' part in `worst`).
         let eps = self.params.collision.epsilon;
-        let nf = colliders.len().max(1);
-        let mut worst = f32::NEG_INFINITY;
-        for (k, c) in colliders.iter().enumerate() {
-            if let Some(s) = contact::signed_sample(c, x, x, 1.0, self.side[i * nf + k], eps) {
-                worst = worst.max(eps - s.distance);
-            }
-        }
         for d in depth {
             if let Some(s) = d.sample(x, 2.0 * eps, 1.0) {
                 worst = worst.max(eps - s.distance);
