@@ -76,14 +76,17 @@ fn display() -> Option<Xvfb> {
 
 // ---- Xvfb --------------------------------------------------------------------------------
 
-/// An X server of the test's own, on the display number it chose; stopped on drop.
+/// An X server of the test's own, on the display number it chose; stopped on drop. Its
+/// stderr (with `-audit 4`: each client's connection and disconnection) goes to `log`.
 struct Xvfb {
     child: Child,
     display: String,
+    log: tempfile::NamedTempFile,
 }
 
 impl Xvfb {
     fn start() -> Xvfb {
+        let log = tempfile::NamedTempFile::new().unwrap();
         let mut child = Command::new("Xvfb")
             .args([
                 "-displayfd",
@@ -93,9 +96,11 @@ impl Xvfb {
                 "1600x1000x24",
                 "-nolisten",
                 "tcp",
+                "-audit",
+                "4",
             ])
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            .stderr(log.reopen().unwrap())
             .spawn()
             .expect("Xvfb starts");
         // Xvfb writes the display number once it accepts connections.
@@ -109,6 +114,7 @@ impl Xvfb {
         let mut xvfb = Xvfb {
             child,
             display: String::new(),
+            log,
         };
         let n = rx.recv_timeout(Duration::from_secs(20)).unwrap_or_default();
         let n = n.trim();
@@ -118,6 +124,32 @@ impl Xvfb {
         );
         xvfb.display = format!(":{n}");
         xvfb
+    }
+
+    /// What the server has written so far.
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.log.path()).unwrap_or_default()
+    }
+
+    /// Whether the server was left without clients and then connected again: an X server
+    /// resets when its last client leaves and refuses connections during the reset, so a
+    /// viewer that lets its display connection count fall to zero while starting can fail
+    /// to open its window.
+    fn emptied_then_reconnected(&self) -> bool {
+        let mut clients = 0i32;
+        let mut emptied = false;
+        for line in self.log().lines() {
+            if line.contains("connected from") {
+                if emptied {
+                    return true;
+                }
+                clients += 1;
+            } else if line.ends_with(" disconnected") {
+                clients -= 1;
+                emptied |= clients == 0;
+            }
+        }
+        false
     }
 }
 
@@ -274,14 +306,22 @@ impl Drop for Viewer {
 }
 
 /// Runs the viewer to its end, expecting exit 0; what it said.
+/// Also checks that the viewer held a display connection from its first to its last (see
+/// [`Xvfb::emptied_then_reconnected`]).
 fn view_ok(x: &Xvfb, args: &[&str], cwd: &Path) -> Said {
     let said = Viewer::spawn(Some(x), args, cwd).finish();
     assert_eq!(
         said.code,
         Some(0),
-        "{args:?}\nstdout:\n{}\nstderr:\n{}",
+        "{args:?}\nstdout:\n{}\nstderr:\n{}\nXvfb:\n{}",
         said.lines.join("\n"),
-        said.err
+        said.err,
+        x.log()
+    );
+    assert!(
+        !x.emptied_then_reconnected(),
+        "{args:?}: the X server was left without clients while the viewer ran:\n{}",
+        x.log()
     );
     said
 }
@@ -522,7 +562,7 @@ fn reload_keeps_state_and_shows_the_change() {
     let before = frames_seen(&v.seen);
     let said = v.finish();
     eprintln!("{reloaded} (seen {seen_at:?} after the save)");
-    assert_eq!(said.code, Some(0), "{}", said.err);
+    assert_eq!(said.code, Some(0), "{}\nXvfb:\n{}", said.err, x.log());
     assert!(reloaded.contains("p.ron"), "{reloaded}");
     assert!(reloaded.ends_with("rebuilt []"), "{reloaded}");
     // Frame numbers only go up, across the reload too: the state was kept.
@@ -563,7 +603,7 @@ fn broken_edit_keeps_running_and_shows_the_error() {
     let at_error = frames_seen(&v.seen).last().copied().unwrap();
     let said = v.finish();
     eprintln!("{error}");
-    assert_eq!(said.code, Some(0), "{}", said.err);
+    assert_eq!(said.code, Some(0), "{}\nXvfb:\n{}", said.err, x.log());
     assert!(error.contains(&format!("p.ron:{line}:")), "{error}");
     assert!(
         error.contains("the last good pipeline keeps running"),

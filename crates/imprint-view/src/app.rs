@@ -29,14 +29,17 @@ const PANEL_PERIOD: Duration = Duration::from_millis(100);
 const DEFAULT_SIZE: [u32; 2] = [960, 540];
 
 pub fn run(opts: ViewOptions) -> Result<(), ViewError> {
-    let gpu = GpuContext::shared()
-        .map_err(|e| ViewError::display(format!("imprint view draws with the GPU (wgpu): {e}")))?;
+    // The display connection first: Vulkan drivers open and close display connections of
+    // their own while the adapters are listed, and an X server with no client left resets,
+    // refusing a connection made during the reset. Held open, winit's keeps it from resetting.
     let event_loop = EventLoop::new().map_err(|e| {
         ViewError::display(format!(
             "imprint view cannot open a window: {e}; on a machine without a display, run it \
              under Xvfb: xvfb-run -a imprint view FILE"
         ))
     })?;
+    let gpu = GpuContext::shared()
+        .map_err(|e| ViewError::display(format!("imprint view draws with the GPU (wgpu): {e}")))?;
     let mut app = App::new(opts, gpu);
     event_loop
         .run_app(&mut app)
