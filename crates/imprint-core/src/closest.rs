@@ -58,13 +58,85 @@ impl Pairs {
         }
     }
 
+    /// Lane `l`'s triangle is `faces[idx[l]]`, for every lane. Where the CPU has AVX, eight
+    /// triangles are loaded whole and transposed into the lanes with shuffles (the lane by
+    /// lane copy is nine scalar stores per lane, and took half the field refinement's time
+    /// outside the kernel); the same values either way.
+    #[inline]
+    pub fn set_triangles(&mut self, faces: &[[Vec3; 3]], idx: &[u32; LANES]) {
+        assert!(idx.iter().all(|&n| (n as usize) < faces.len()));
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX (checked just above); every index is in `faces`.
+            return unsafe { self.set_triangles_avx(faces, idx) };
+        }
+        for (l, &n) in idx.iter().enumerate() {
+            self.set_triangle(l, &faces[n as usize]);
+        }
+    }
+
+    /// [`Pairs::set_triangles`] eight lanes at a time: the first eight floats of each
+    /// triangle (a, b, c.x, c.y) as one load per lane, an 8×8 transpose, and c.z lane by lane.
+    ///
+    /// # Safety
+    /// The CPU has AVX, and every index is in `faces`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn set_triangles_avx(&mut self, faces: &[[Vec3; 3]], idx: &[u32; LANES]) {
+        use std::arch::x86_64::*;
+        const { assert!(std::mem::size_of::<[Vec3; 3]>() == 36) };
+        let base = faces.as_ptr().cast::<f32>();
+        for g in 0..LANES / 8 {
+            let lanes = g * 8..g * 8 + 8;
+            // SAFETY: each index is in `faces` (the caller's promise), so the 8 floats read
+            // from a face's start lie within its 9; stores go to 8 lanes of a live array.
+            unsafe {
+                let row = |k: usize| _mm256_loadu_ps(base.add(idx[g * 8 + k] as usize * 9));
+                let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+                let (r4, r5, r6, r7) = (row(4), row(5), row(6), row(7));
+                let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+                let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+                let (t4, t5) = (_mm256_unpacklo_ps(r4, r5), _mm256_unpackhi_ps(r4, r5));
+                let (t6, t7) = (_mm256_unpacklo_ps(r6, r7), _mm256_unpackhi_ps(r6, r7));
+                let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+                let u1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+                let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+                let u3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+                let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+                let u5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+                let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+                let u7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+                // Float k of every lane's triangle: corner k / 3, axis k % 3.
+                let floats = [
+                    _mm256_permute2f128_ps::<0x20>(u0, u4),
+                    _mm256_permute2f128_ps::<0x20>(u1, u5),
+                    _mm256_permute2f128_ps::<0x20>(u2, u6),
+                    _mm256_permute2f128_ps::<0x20>(u3, u7),
+                    _mm256_permute2f128_ps::<0x31>(u0, u4),
+                    _mm256_permute2f128_ps::<0x31>(u1, u5),
+                    _mm256_permute2f128_ps::<0x31>(u2, u6),
+                    _mm256_permute2f128_ps::<0x31>(u3, u7),
+                ];
+                for (k, v) in floats.into_iter().enumerate() {
+                    let dst = &mut self.tri[k / 3][k % 3][lanes.clone()];
+                    _mm256_storeu_ps(dst.as_mut_ptr(), v);
+                }
+                for l in lanes {
+                    self.tri[2][2][l] = *base.add(idx[l] as usize * 9 + 8);
+                }
+            }
+        }
+    }
+
     /// Every lane's closest point and squared distance, the scalar function's bits (a lane
     /// the kernel cannot take is redone by the scalar function).
     #[inline]
     pub fn closest(&self) -> Closest {
         let mut out = Out::default();
         kernel(&self.p, &self.tri, &mut out);
-        for l in (0..LANES).filter(|&l| out.degenerate[l]) {
+        // Nearly never: one test of all lanes (no early exit, so it vectorises) first.
+        let any = out.degenerate.iter().fold(false, |any, &d| any | d);
+        for l in (0..LANES).filter(|&l| any && out.degenerate[l]) {
             let p = Vec3::new(self.p[0][l], self.p[1][l], self.p[2][l]);
             let [a, b, c] = self.tri.map(|v| Vec3::new(v[0][l], v[1][l], v[2][l]));
             let q = closest_point_on_triangle(p, a, b, c);
@@ -269,6 +341,31 @@ mod tests {
             want.to_array().map(f32::to_bits)
         );
         assert_eq!(d2.to_bits(), (want - p).length_squared().to_bits());
+    }
+
+    /// The transposed load gives every lane the triangle the lane by lane copy gives it,
+    /// the last face of the array included (its load stops at its own end).
+    #[test]
+    fn set_triangles_is_set_triangle_per_lane() {
+        let faces: Vec<[Vec3; 3]> = test_pairs().into_iter().take(1000).map(|p| p.1).collect();
+        let mut seed = 7u32;
+        for round in 0..200 {
+            let idx: [u32; LANES] = std::array::from_fn(|l| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                if (round + l) % 5 == 0 {
+                    999
+                } else {
+                    (seed >> 8) % 1000
+                }
+            });
+            let (mut fast, mut slow) = (Pairs::default(), Pairs::default());
+            fast.set_triangles(&faces, &idx);
+            for (l, &n) in idx.iter().enumerate() {
+                slow.set_triangle(l, &faces[n as usize]);
+            }
+            let bits = |p: &Pairs| p.tri.map(|c| c.map(|a| a.map(f32::to_bits)));
+            assert_eq!(bits(&fast), bits(&slow), "round {round}");
+        }
     }
 
     /// Through a batch (the kernel this CPU picks, and the scalar redo of degenerate lanes),

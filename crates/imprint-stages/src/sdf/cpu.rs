@@ -452,9 +452,7 @@ impl<'a> Neighbours<'a> {
         let mut best = ([f32::INFINITY; LANES], [u32::MAX; LANES]);
         let pairs = &mut group.pairs;
         let mut try_slot = |cands: &[u32; LANES]| {
-            for (l, &n) in cands.iter().enumerate() {
-                pairs.set_triangle(l, &faces[n as usize]);
-            }
+            pairs.set_triangles(faces, cands);
             let d2 = pairs.closest().d2;
             // Selects, not branches: which candidate wins is a coin toss to the predictor.
             for l in 0..LANES {
