@@ -158,10 +158,16 @@ fn signed_lanes(
     eps: f32,
     [end_corners, start_corners]: &mut [Corners; 2],
 ) -> Option<SignedLanes> {
-    if end.lanes_far(&t.x) && start.is_none_or(|(f, _)| f.lanes_far(&t.x)) {
+    let end_cells = end.cell_lanes(&t.x);
+    let start_cells = start.map(|(f, _)| f.cell_lanes(&t.x));
+    if end.lanes_far(&end_cells)
+        && start
+            .zip(start_cells.as_ref())
+            .is_none_or(|((f, _), c)| f.lanes_far(c))
+    {
         return None;
     }
-    let (db, vb, ib) = end.sample_lanes(&t.x, end_corners);
+    let (db, vb, ib) = end.sample_lanes(&t.x, &end_cells, end_corners);
     let lane = |v: &[Lanes; 3], m: usize| [v[0][m], v[1][m], v[2][m]];
     let side = |m: usize| [t.side[0][m], t.side[1][m], t.side[2][m], t.side[3][m]];
     let reach = |m: usize| 2.0 * eps + length(each(|k| t.x[k][m] - t.from[k][m]));
@@ -180,7 +186,8 @@ fn signed_lanes(
             }
         }
         Some((start, s)) => {
-            let (da, va, ia) = start.sample_lanes(&t.x, start_corners);
+            let cells = start_cells.as_ref().expect("computed with start");
+            let (da, va, ia) = start.sample_lanes(&t.x, cells, start_corners);
             let far = end.field.far_value();
             for m in 0..LANES {
                 let (a, b) = ((da[m], lane(&va, m)), (db[m], lane(&vb, m)));
@@ -462,7 +469,8 @@ mod tests {
                 let mut t = first;
                 t.x.iter_mut().flatten().for_each(|x| *x += nudge);
                 let lanes = touch(fields, &t, eps, friction, &mut kept);
-                let (d, v, in_band) = view.sample_lanes(&t.x, &mut Corners::default());
+                let (d, v, in_band) =
+                    view.sample_lanes(&t.x, &view.cell_lanes(&t.x), &mut Corners::default());
                 for m in 0..LANES {
                     let f = view.sample(Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]));
                     let vector = Vec3::new(v[0][m], v[1][m], v[2][m]).to_array();

@@ -35,25 +35,42 @@ pub struct FieldView<'a> {
 /// before a read of another, or of the same after it changed.
 #[derive(Clone, Debug)]
 pub struct Corners {
-    /// Per lane, the index of the cell the lane's corners start at; `usize::MAX`: none held.
-    base: [usize; LANES],
+    /// Per axis and lane, the cell the lane's corners start at; [`Corners::NONE`]: none held
+    /// (a read's cells are never negative).
+    base: [[i32; LANES]; 3],
     cells: [[[f32; LANES]; 8]; 4],
 }
 
 impl Default for Corners {
     fn default() -> Self {
         Corners {
-            base: [usize::MAX; LANES],
+            base: [[Self::NONE; LANES]; 3],
             cells: [[[0.0; LANES]; 8]; 4],
         }
     }
 }
 
 impl Corners {
+    const NONE: i32 = i32::MIN;
+
     /// Drops what is held: the next read loads every lane's cells.
     pub fn forget(&mut self) {
-        self.base = [usize::MAX; LANES];
+        self.base = [[Self::NONE; LANES]; 3];
     }
+}
+
+/// Where [`LANES`] points (`p[axis][lane]`) fall in one field's grid, worked out once for
+/// both [`FieldView::lanes_far`] and [`FieldView::sample_lanes`].
+#[derive(Clone, Copy, Debug)]
+pub struct CellLanes {
+    /// The coordinates' floor (exact below 2^24, as `cell_coords`).
+    b: [[f32; LANES]; 3],
+    /// The same clamped to the grid, as integers (where `inner`, the floor itself).
+    i: [[i32; LANES]; 3],
+    /// The fraction within the cell.
+    t: [[f32; LANES]; 3],
+    /// Whether all eight cells of a read are in the grid.
+    inner: [bool; LANES],
 }
 
 /// A sample and, for a signed field, the blend of the cells' signed distances
@@ -81,31 +98,39 @@ impl<'a> FieldView<'a> {
         self.signs.is_some()
     }
 
-    /// [`FieldView::sample`] at [`LANES`] points (`p[axis][lane]`), lane by lane the same
-    /// bits: the distances, the closest-point vectors and whether in the band. The lanes'
-    /// cell coordinates, weights and blends are computed side by side (loops over the lanes,
-    /// which vectorise); one particle at a time, each read was a chain of dependent steps (a
-    /// division, the cell's index, its loads, eight additions in order, a square root) that
-    /// left the processor waiting. Lanes whose cells are not all inside the grid take
-    /// [`FieldView::sample`]. `corners` holds the lanes' cells from the last read of this
-    /// field (see [`Corners`]): a lane still in the same cell loads nothing.
+    /// [`FieldView::sample`] at [`LANES`] points (`p[axis][lane]`, their cells `c` from
+    /// [`FieldView::cell_lanes`]), lane by lane the same bits: the distances, the
+    /// closest-point vectors and whether in the band. The lanes' weights and blends are
+    /// computed side by side (loops over the lanes, which vectorise); one particle at a time,
+    /// each read was a chain of dependent steps (a division, the cell's index, its loads, eight
+    /// additions in order, a square root) that left the processor waiting. Lanes whose cells
+    /// are not all inside the grid take [`FieldView::sample`]. `corners` holds the lanes'
+    /// cells from the last read of this field (see [`Corners`]): a lane still in the same cell
+    /// loads nothing, and which lanes load is found for all lanes at once (a branch per lane
+    /// missed as often as the cloth jitters across cell faces).
     #[inline(always)]
-    #[allow(clippy::type_complexity)]
+    // A lane indexes the cells, the held corners and the outputs alike.
+    #[allow(clippy::type_complexity, clippy::needless_range_loop)]
     pub fn sample_lanes(
         &self,
         p: &[[f32; LANES]; 3],
+        c: &CellLanes,
         corners: &mut Corners,
     ) -> ([f32; LANES], [[f32; LANES]; 3], [bool; LANES]) {
-        let (b, t, inner) = self.cell_lanes(p);
+        let (t, inner) = (&c.t, c.inner);
+        let mut load = 0u32;
+        for m in 0..LANES {
+            let held = (0..3).fold(true, |h, a| h & (corners.base[a][m] == c.i[a][m]));
+            load |= ((inner[m] & !held) as u32) << m;
+        }
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
         let far = -self.field.far_value();
-        for m in (0..LANES).filter(|&m| inner[m]) {
-            let base = [b[0][m] as usize, b[1][m] as usize, b[2][m] as usize];
+        while load != 0 {
+            let m = load.trailing_zeros() as usize;
+            load &= load - 1;
+            let base = [0, 1, 2].map(|a| c.i[a][m] as usize);
+            (0..3).for_each(|a| corners.base[a][m] = c.i[a][m]);
             let i0 = base[0] + nx * base[1] + nxy * base[2];
-            if corners.base[m] == i0 {
-                continue;
-            }
-            corners.base[m] = i0;
             let cells = &mut corners.cells;
             if self.far_bricks.all_far(base) {
                 // The cells are (0, 0, 0, -far): the values, not loaded.
@@ -159,45 +184,54 @@ impl<'a> FieldView<'a> {
         (dist, v, in_band)
     }
 
-    /// Whether every one of the [`LANES`] points (`p[axis][lane]`) reads plainly far: off
+    /// Whether every one of the [`LANES`] points (their cells `c`) reads plainly far: off
     /// the grid by a cell or more, or among cells that are all far ([`FarBricks`]). Such a
     /// read has no vector and is not in the band, so no contact can come of it; this costs
     /// a few operations per lane, where [`FieldView::sample_lanes`] loads eight cells.
     #[inline(always)]
-    pub fn lanes_far(&self, p: &[[f32; LANES]; 3]) -> bool {
-        let (b, _, inner) = self.cell_lanes(p);
+    pub fn lanes_far(&self, c: &CellLanes) -> bool {
         let dims = self.dims.to_array().map(|d| d as f32);
-        (0..LANES).all(|m| {
+        let mut all = true;
+        for m in 0..LANES {
             // Off the grid by a cell or more: `read` gives the far sample.
-            let off = (0..3).any(|a| b[a][m] < -1.0 || b[a][m] >= dims[a]);
-            let base = [b[0][m] as usize, b[1][m] as usize, b[2][m] as usize];
-            off || inner[m] && self.far_bricks.all_far(base)
-        })
+            let off = (0..3).fold(false, |o, a| {
+                o | (c.b[a][m] < -1.0) | (c.b[a][m] >= dims[a])
+            });
+            // `i` is clamped to the grid, so the brick lookup is in bounds for every lane.
+            let base = [0, 1, 2].map(|a| c.i[a][m] as usize);
+            all &= off | (c.inner[m] & self.far_bricks.all_far(base));
+        }
+        all
     }
 
     /// The lanes' cells (`p[axis][lane]`): their coordinates' floor (exact below 2^24, as
     /// `cell_coords`), the fraction, and whether all eight cells of a read are in the grid.
     #[inline(always)]
-    #[allow(clippy::type_complexity)]
-    fn cell_lanes(
-        &self,
-        p: &[[f32; LANES]; 3],
-    ) -> ([[f32; LANES]; 3], [[f32; LANES]; 3], [bool; LANES]) {
+    // A lane indexes the positions and every output alike.
+    #[allow(clippy::needless_range_loop)]
+    pub fn cell_lanes(&self, p: &[[f32; LANES]; 3]) -> CellLanes {
         let spec = &self.field.spec;
         let (origin, cell) = (spec.origin.to_array(), spec.cell);
         let dims = self.dims.to_array().map(|d| d as f32);
-        let mut t = [[0.0f32; LANES]; 3];
-        let mut b = [[0.0f32; LANES]; 3];
-        let mut inner = [true; LANES];
+        let mut c = CellLanes {
+            b: [[0.0; LANES]; 3],
+            i: [[0; LANES]; 3],
+            t: [[0.0; LANES]; 3],
+            inner: [true; LANES],
+        };
         for a in 0..3 {
             for m in 0..LANES {
-                let c = (p[a][m] - origin[a]) / cell;
-                b[a][m] = c.floor();
-                t[a][m] = c - b[a][m];
-                inner[m] &= b[a][m] >= 0.0 && b[a][m] + 1.0 < dims[a];
+                let x = (p[a][m] - origin[a]) / cell;
+                let b = x.floor();
+                c.b[a][m] = b;
+                c.t[a][m] = x - b;
+                c.inner[m] &= (b >= 0.0) & (b + 1.0 < dims[a]);
+                // SAFETY: clamped to [0, dims − 1] (NaN to 0 by `max`), which an i32 holds:
+                // the plain conversion, which saturates, is one scalar call per lane.
+                c.i[a][m] = unsafe { b.max(0.0).min(dims[a] - 1.0).to_int_unchecked::<i32>() };
             }
         }
-        (b, t, inner)
+        c
     }
 
     /// The field at `p`, as `Sampling::Vector` reads it.
