@@ -15,8 +15,9 @@
 //! eight particles of a block away from the edges have their `k`-th neighbours side by side
 //! too, so a slot's other ends are one load per axis (a *run*), not eight.
 
-use super::springs::{Links, SpringLaw};
+use super::springs::{LinkQuad, Links, SpringLaw};
 use glam::Vec3;
+use std::collections::HashMap;
 
 /// Particles per block.
 pub const LANES: usize = 8;
@@ -27,29 +28,27 @@ pub type Lane = [f32; LANES];
 /// Lengths below this count as zero when normalising a spring (as in `cpu`).
 const TINY: f32 = 1e-20;
 
-/// Spring `l` of quad `q` of the eight particles of a block.
+/// Spring `l` of quad `q` of the eight particles of a block: where its other ends and its
+/// constants are. Twelve bytes: a substep reads every block's slots, and with the lanes'
+/// ends and constants in each slot they were 136 bytes, most of what it streamed from
+/// memory per particle; a cloth has few distinct constants (a grid: one set per kind of
+/// spring and edge), kept once in [`Blocks`].
 #[derive(Clone, Copy, Debug)]
 struct Slot {
-    /// The other ends, one per lane.
-    other: [u32; LANES],
-    /// `other[0]` when the other ends are consecutive (one load per axis), else `u32::MAX`.
+    /// The first other end when they are consecutive (one load per axis), else `u32::MAX`.
     run: u32,
+    /// The other ends, one per lane: `Blocks::others[other]`.
+    other: u32,
+    /// The lanes' rest lengths and constants: `Blocks::constants[constants]`.
+    constants: u32,
+}
+
+/// The rest lengths and constants of a slot's springs, one per lane.
+#[derive(Clone, Copy, Debug, Default)]
+struct Constants {
     rest: Lane,
     k_stretch: Lane,
     k_compress: Lane,
-}
-
-impl Slot {
-    /// The other ends' positions, one lane at a time (a slot that is not a run).
-    #[inline(always)]
-    fn gather(&self, at: &Lanes) -> [Lane; 3] {
-        let mut v = [[0.0f32; LANES]; 3];
-        for (m, &i) in self.other.iter().enumerate() {
-            let i = i as usize;
-            (v[0][m], v[1][m], v[2][m]) = (at.x[i], at.y[i], at.z[i]);
-        }
-        v
-    }
 }
 
 /// [`Links`] regrouped by blocks of eight particles (see the module docs).
@@ -61,6 +60,10 @@ pub struct Blocks {
     /// Block b's slots are `slots[offsets[b]..offsets[b + 1]]`.
     offsets: Vec<u32>,
     slots: Vec<Slot>,
+    /// The slots' other ends, one array per slot that is not a run.
+    others: Vec<[u32; LANES]>,
+    /// The slots' distinct constants.
+    constants: Vec<Constants>,
 }
 
 /// Particle positions as structure of arrays, padded to a whole number of blocks.
@@ -109,7 +112,9 @@ impl Blocks {
     pub fn build(links: &Links, n: usize) -> Self {
         let blocks = n.div_ceil(LANES);
         let mut offsets = Vec::with_capacity(blocks + 1);
-        let mut slots = Vec::new();
+        let (mut slots, mut others, mut constants) = (Vec::new(), Vec::new(), Vec::new());
+        // Each distinct set of constants once, found by its bits.
+        let mut known: HashMap<[u32; 3 * LANES], u32> = HashMap::new();
         offsets.push(0);
         for b in 0..blocks {
             let first = b * LANES;
@@ -120,27 +125,29 @@ impl Blocks {
                 .unwrap_or(0);
             for q in 0..depth {
                 for l in 0..4 {
-                    let mut s = Slot {
-                        other: std::array::from_fn(|m| (first + m) as u32),
-                        run: u32::MAX,
-                        rest: [0.0; LANES],
-                        k_stretch: [0.0; LANES],
-                        k_compress: [0.0; LANES],
-                    };
-                    for m in 0..LANES {
-                        if let Some(quad) = quads(first + m).get(q) {
-                            s.other[m] = quad.other[l];
-                            s.rest[m] = quad.rest[l];
-                            s.k_stretch[m] = quad.k_stretch[l];
-                            s.k_compress[m] = quad.k_compress[l];
-                        }
-                    }
-                    if (1..LANES).all(|m| s.other[m] == s.other[0] + m as u32)
-                        && (s.other[0] as usize + LANES) <= blocks * LANES
+                    let (other, c) = spring_of_lanes(first, |i| quads(i).get(q), l);
+                    let run = (1..LANES).all(|m| other[m] == other[0] + m as u32)
+                        && (other[0] as usize + LANES) <= blocks * LANES;
+                    let mut bits = [0u32; 3 * LANES];
+                    for (i, v) in [c.rest, c.k_stretch, c.k_compress]
+                        .iter()
+                        .flatten()
+                        .enumerate()
                     {
-                        s.run = s.other[0];
+                        bits[i] = v.to_bits();
                     }
-                    slots.push(s);
+                    let constants_at = *known.entry(bits).or_insert_with(|| {
+                        constants.push(c);
+                        constants.len() as u32 - 1
+                    });
+                    slots.push(Slot {
+                        run: if run { other[0] } else { u32::MAX },
+                        other: if run { u32::MAX } else { others.len() as u32 },
+                        constants: constants_at,
+                    });
+                    if !run {
+                        others.push(other);
+                    }
                 }
             }
             offsets.push(slots.len() as u32);
@@ -150,7 +157,25 @@ impl Blocks {
             particles: n,
             offsets,
             slots,
+            others,
+            constants,
         }
+    }
+
+    /// Slot `slot`'s other ends' positions: one load per axis for a run, else one lane at
+    /// a time.
+    #[inline(always)]
+    fn other_ends(&self, slot: &Slot, at: &Lanes) -> [Lane; 3] {
+        if slot.run != u32::MAX {
+            let o = slot.run as usize;
+            return [load(&at.x, o), load(&at.y, o), load(&at.z, o)];
+        }
+        let mut v = [[0.0f32; LANES]; 3];
+        for (m, &i) in self.others[slot.other as usize].iter().enumerate() {
+            let i = i as usize;
+            (v[0][m], v[1][m], v[2][m]) = (at.x[i], at.y[i], at.z[i]);
+        }
+        v
     }
 
     /// Whether this was built for `n` particles (a checkpoint leaves it empty).
@@ -207,9 +232,10 @@ impl Blocks {
                     let o = slot.run as usize;
                     [load8(&at.x, o), load8(&at.y, o), load8(&at.z, o)]
                 } else {
-                    let v = slot.gather(at);
+                    let v = self.other_ends(slot, at);
                     [load8(&v[0], 0), load8(&v[1], 0), load8(&v[2], 0)]
                 };
+                let consts = &self.constants[slot.constants as usize];
                 // (No `array::map` here: its closures are not inlined into AVX2 code.)
                 let d = [
                     _mm256_sub_ps(o[0], p[0]),
@@ -219,11 +245,11 @@ impl Blocks {
                 let sq = |v| _mm256_mul_ps(v, v);
                 let len =
                     _mm256_sqrt_ps(_mm256_add_ps(_mm256_add_ps(sq(d[0]), sq(d[1])), sq(d[2])));
-                let rest = load8(&slot.rest, 0);
+                let rest = load8(&consts.rest, 0);
                 let e = _mm256_sub_ps(len, rest);
                 let k = _mm256_blendv_ps(
-                    load8(&slot.k_compress, 0),
-                    load8(&slot.k_stretch, 0),
+                    load8(&consts.k_compress, 0),
+                    load8(&consts.k_stretch, 0),
                     _mm256_cmp_ps::<_CMP_GE_OQ>(e, zero),
                 );
                 // `maxps` gives the second operand when either is NaN, as `forces_by`.
@@ -266,13 +292,9 @@ impl Blocks {
         let slots = &self.slots[self.offsets[b] as usize..self.offsets[b + 1] as usize];
         for quad in slots.chunks_exact(4) {
             for (l, slot) in quad.iter().enumerate() {
-                let o = if slot.run != u32::MAX {
-                    let o = slot.run as usize;
-                    [load(&at.x, o), load(&at.y, o), load(&at.z, o)]
-                } else {
-                    slot.gather(at)
-                };
-                let (c, d) = spring_lanes::<QUAD>(&p, &o, slot, max_stretch, &mut over);
+                let o = self.other_ends(slot, at);
+                let k = &self.constants[slot.constants as usize];
+                let (c, d) = spring_lanes::<QUAD>(&p, &o, k, max_stretch, &mut over);
                 for (acc, d) in acc[l].iter_mut().zip(&d) {
                     for m in 0..LANES {
                         acc[m] += c[m] * d[m];
@@ -300,7 +322,7 @@ impl Blocks {
 fn spring_lanes<const QUAD: bool>(
     p: &[Lane; 3],
     o: &[Lane; 3],
-    slot: &Slot,
+    slot: &Constants,
     max_stretch: f32,
     over: &mut [bool; LANES],
 ) -> (Lane, [Lane; 3]) {
@@ -329,6 +351,29 @@ fn spring_lanes<const QUAD: bool>(
         over[m] |= len[m] > slot.rest[m] * max_stretch;
     }
     (c, d)
+}
+
+/// Spring `l` of the quads `quad(i)` of particles `first..first + LANES`: the other ends and
+/// constants, lane by lane; a particle with no such quad pads its lane (its own index,
+/// constants 0: it adds exactly zero).
+// A lane indexes the ends and every constant alike.
+#[allow(clippy::needless_range_loop)]
+fn spring_of_lanes<'a>(
+    first: usize,
+    quad: impl Fn(usize) -> Option<&'a LinkQuad>,
+    l: usize,
+) -> ([u32; LANES], Constants) {
+    let mut other: [u32; LANES] = std::array::from_fn(|m| (first + m) as u32);
+    let mut c = Constants::default();
+    for m in 0..LANES {
+        if let Some(quad) = quad(first + m) {
+            other[m] = quad.other[l];
+            c.rest[m] = quad.rest[l];
+            c.k_stretch[m] = quad.k_stretch[l];
+            c.k_compress[m] = quad.k_compress[l];
+        }
+    }
+    (other, c)
 }
 
 /// `[f(0), .., f(LANES - 1)]`, as a loop the compiler vectorises.
