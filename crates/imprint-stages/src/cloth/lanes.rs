@@ -51,6 +51,18 @@ struct Constants {
     k_compress: Lane,
 }
 
+impl Constants {
+    /// Every value's bits: equal sets are equal bits (a slot shares a set only if so).
+    fn bits(&self) -> [u32; 3 * LANES] {
+        let mut bits = [0u32; 3 * LANES];
+        let values = [self.rest, self.k_stretch, self.k_compress];
+        for (b, v) in bits.iter_mut().zip(values.iter().flatten()) {
+            *b = v.to_bits();
+        }
+        bits
+    }
+}
+
 /// [`Links`] regrouped by blocks of eight particles (see the module docs).
 #[derive(Clone, Debug, Default)]
 pub struct Blocks {
@@ -128,15 +140,7 @@ impl Blocks {
                     let (other, c) = spring_of_lanes(first, |i| quads(i).get(q), l);
                     let run = (1..LANES).all(|m| other[m] == other[0] + m as u32)
                         && (other[0] as usize + LANES) <= blocks * LANES;
-                    let mut bits = [0u32; 3 * LANES];
-                    for (i, v) in [c.rest, c.k_stretch, c.k_compress]
-                        .iter()
-                        .flatten()
-                        .enumerate()
-                    {
-                        bits[i] = v.to_bits();
-                    }
-                    let constants_at = *known.entry(bits).or_insert_with(|| {
+                    let constants_at = *known.entry(c.bits()).or_insert_with(|| {
                         constants.push(c);
                         constants.len() as u32 - 1
                     });
