@@ -253,6 +253,28 @@ fn classify(f: Sample, side_k: vec4<f32>, reach: f32, band_miss: bool) -> Signed
     return Signed(true, d, -v, band_miss);
 }
 
+// Whether classify reads an unsigned sample's reach: its vector runs along the memory.
+fn turned(f: Sample, side_k: vec4<f32>) -> bool {
+    return !f.signed && side_k.w > 0.0 && dot(f.vector, side_k.xyz) > 0.0;
+}
+
+// contact::moved: the field in `slot` at the other field's closest point `q`, no more than
+// `jump`.
+fn moved(slot: u32, q: vec3<f32>, jump: f32) -> f32 {
+    return min(sample_field(slot, q).distance, jump);
+}
+
+// contact::sweep of the other field's reading: how much less the reach of a crossing is.
+fn outside(r: Signed, agree: bool) -> f32 {
+    if !r.ok || r.distance < 0.0 {
+        return 0.0;
+    }
+    if agree {
+        return r.distance;
+    }
+    return F32_MAX;
+}
+
 // contact::signed_sample for collider k.
 fn signed_sample(k: u32, x: vec3<f32>, x_from: vec3<f32>, side_k: vec4<f32>) -> Signed {
     let s = params.s;
@@ -265,9 +287,22 @@ fn signed_sample(k: u32, x: vec3<f32>, x_from: vec3<f32>, side_k: vec4<f32>) -> 
     let a = sample_field(2u * k, x);
     let far_end = headers[2u * k + 1u].far_value;
     if a.in_band && b.in_band {
-        let reach = reach0 + length(b.vector - a.vector);
-        let p = classify(a, side_k, reach, false);
-        let q = classify(b, side_k, reach, false);
+        // A crossing only as deep as the body moved here, and a sweep the surface could
+        // make where the other field finds the particle outside (contact.rs).
+        let jump = length(b.vector - a.vector);
+        var reach_a = reach0;
+        var reach_b = reach0;
+        if turned(a, side_k) {
+            reach_a = reach0 + moved(2u * k + 1u, x + a.vector, jump);
+        }
+        if turned(b, side_k) {
+            reach_b = reach0 + moved(2u * k, x + b.vector, jump);
+        }
+        let p0 = classify(a, side_k, reach_a, false);
+        let q0 = classify(b, side_k, reach_b, false);
+        let agree = dot(a.vector, b.vector) < 0.0;
+        let p = classify(a, side_k, reach_a - outside(q0, agree), false);
+        let q = classify(b, side_k, reach_b - outside(p0, agree), false);
         if p.ok && q.ok {
             let distance = p.distance + (q.distance - p.distance) * s;
             var np = p.outward;
@@ -283,11 +318,20 @@ fn signed_sample(k: u32, x: vec3<f32>, x_from: vec3<f32>, side_k: vec4<f32>) -> 
         }
         return p;
     }
+    // One field far: the body moved here by up to the band, or more.
     if !a.in_band && b.in_band {
-        return classify(b, side_k, reach0 + far_end, true);
+        var reach = reach0;
+        if turned(b, side_k) {
+            reach = reach0 + moved(2u * k, x + b.vector, far_end);
+        }
+        return classify(b, side_k, reach, true);
     }
     if a.in_band && !b.in_band {
-        return classify(a, side_k, reach0 + far_end, true);
+        var reach = reach0;
+        if turned(a, side_k) {
+            reach = reach0 + moved(2u * k + 1u, x + a.vector, far_end);
+        }
+        return classify(a, side_k, reach, true);
     }
     let f = Sample(
         a.distance + (b.distance - a.distance) * s,

@@ -14,7 +14,7 @@ use imprint_stages::cloth::{
 use imprint_tests::asset;
 
 use imprint_tests::cloth::{
-    grid, harada, sim, sphere_drop_field, sphere_drop_params, sphere_field,
+    gap, grid, harada, sim, sphere_drop_field, sphere_drop_params, sphere_field,
 };
 
 const FPS: f32 = 60.0;
@@ -731,4 +731,31 @@ fn time_a_64x64_cloth_on_a_sphere() {
             });
         }
     }
+}
+
+/// A cloth falls into the gap between two spheres (ears, fingers) moving sideways
+/// ([`gap`]). Its closest point jumps across the gap between frames though neither sphere
+/// moved that far, and that jump is not the body's motion (see `contact::moved`). Read as
+/// motion, the far sphere read as crossed, the particle was pushed into it, and the cloth blew
+/// up at frame 9. Every frame: no particle inside a sphere, and none found inside.
+#[test]
+fn a_cloth_in_the_gap_between_two_moving_spheres_enters_neither() {
+    let mut cloth = sim(&gap::params());
+    let mut prev = gap::field(0);
+    let mut in_gap = 0;
+    for f in 0..40u32 {
+        let next = gap::field(f + 1);
+        let m = cloth
+            .step_frame(&[&prev], &[&next], f, 1.0 / gap::FPS)
+            .unwrap_or_else(|e| panic!("frame {f}: {e}"));
+        assert_eq!(m.inside, 0, "frame {f}: {m:?}");
+        let depth = gap::depth(f + 1, &cloth.positions());
+        assert!(
+            depth < 0.0,
+            "frame {f}: a particle is {depth} inside a sphere"
+        );
+        in_gap = in_gap.max(gap::in_gap(f + 1, &cloth.positions()));
+        prev = next;
+    }
+    assert!(in_gap > 5, "the cloth never hung into the gap: {in_gap}");
 }

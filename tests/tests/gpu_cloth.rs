@@ -12,7 +12,7 @@ use imprint_gpu::test_context;
 use imprint_stages::cloth::gpu::{GpuCloth, GpuCollider};
 use imprint_stages::cloth::{ClothParams, ClothSim, Material, Pin};
 
-use imprint_tests::cloth::{grid, harada, sim, sphere_drop_field, sphere_field};
+use imprint_tests::cloth::{gap, grid, harada, sim, sphere_drop_field, sphere_field};
 
 const FPS: f32 = 60.0;
 
@@ -223,6 +223,34 @@ fn moving_blended_collider_and_ground_match_the_cpu() {
         worst = worst.max(d);
     }
     assert!(worst <= FEW_FRAMES_TOL, "differ by {worst} m");
+}
+
+/// The CPU tests' gap scene ([`gap`]) on the device, which reads a crossing as the CPU does
+/// (`shaders/cloth/step.wgsl`): every frame, no particle inside a sphere and none found
+/// inside, and the cloth hangs into the gap.
+#[test]
+fn a_cloth_in_the_gap_between_two_moving_spheres_enters_neither() {
+    let Some(ctx) = test_context() else { return };
+    let cpu = sim(&gap::params());
+    let mut gpu = GpuCloth::new(ctx, &cpu).unwrap();
+    let mut prev = GpuCollider::from_field(ctx, &gap::field(0)).unwrap();
+    let mut in_gap = 0;
+    for f in 0..40u32 {
+        let next = GpuCollider::from_field(ctx, &gap::field(f + 1)).unwrap();
+        let m = gpu
+            .step_frame(ctx, &[&prev], &[&next], f, 1.0 / gap::FPS)
+            .unwrap_or_else(|e| panic!("frame {f}: {e}"));
+        assert_eq!(m.inside, 0, "frame {f}: {m:?}");
+        let x = gpu.read_positions(ctx).unwrap();
+        let depth = gap::depth(f + 1, &x);
+        assert!(
+            depth < 0.0,
+            "frame {f}: a particle is {depth} inside a sphere"
+        );
+        in_gap = in_gap.max(gap::in_gap(f + 1, &x));
+        prev = next;
+    }
+    assert!(in_gap > 5, "the cloth never hung into the gap: {in_gap}");
 }
 
 #[test]

@@ -15,8 +15,15 @@
 //! direction at its last sample in the band, and reads an unsigned sample as:
 //! - vector against that outward direction → outside, signed distance +d;
 //! - vector along it, and the surface within reach (the particle's own step this substep,
-//!   plus 2ε for the body's, plus how far the closest point moved between the two fields
-//!   when blending) → it crossed the surface: inside, signed distance -d.
+//!   plus 2ε for the body's, plus how far the body moved there between the two fields when
+//!   blending, [`moved`]) → it crossed the surface: inside, signed distance -d.
+//!
+//! When blending, a crossing in one field where the other finds the particle outside must
+//! also be one the surface could make: outside by d there and inside by d' here is a sweep of
+//! d + d' within the reach, with the two fields' outward directions agreeing. Without these
+//! two checks a particle in a gap (between two ears, under an armpit) whose closest point
+//! jumps to the other side between two frames read as crossed, was pushed into the far side
+//! and blew the cloth up, on bodies that moved at a fraction of the band per frame.
 //!
 //! A particle deeper than that reach is taken to be outside (so a body that jumps through the
 //! cloth is not caught, and a gap narrower than the reach can be misread): H's rule that
@@ -123,16 +130,31 @@ pub fn signed_sample(
         })
     };
     let s = c.weight(s);
-    let ra = match c.start {
-        Some(f0) if s < 1.0 => f0.read(x),
+    let (ra, f0) = match c.start {
+        Some(f0) if s < 1.0 => (f0.read(x), f0),
         _ => return one(&rb, &reach, false),
     };
     let (a, b) = (ra.sample, rb.sample);
+    let far = c.end.field.far_value();
     match (a.in_band, b.in_band) {
         (true, true) => {
-            // How far the body moved here between the two fields: its closest point did.
-            let reach = || reach() + (b.vector - a.vector).length();
-            match (one(&ra, &reach, false), one(&rb, &reach, false)) {
+            // A reading whose vector turned round is a crossing only as deep as the body
+            // moved here ([`moved`]); and where the other field finds the particle outside,
+            // only if the surface could have swept past it: outside by d in one field and
+            // inside by d' in the other is a sweep of d + d', and the two fields' outward
+            // directions then agree (one's vector runs against the other's).
+            let jump = (b.vector - a.vector).length();
+            let reach_a = || reach() + moved(x + a.vector, &c.end, jump);
+            let reach_b = || reach() + moved(x + b.vector, &f0, jump);
+            let (p0, q0) = (one(&ra, &reach_a, false), one(&rb, &reach_b, false));
+            let agree = a.vector.dot(b.vector) < 0.0;
+            let outside = |r: Option<Signed>| match r {
+                Some(r) if r.distance >= 0.0 => sweep(r.distance, agree),
+                _ => 0.0,
+            };
+            let p = one(&ra, &|| reach_a() - outside(q0), false);
+            let q = one(&rb, &|| reach_b() - outside(p0), false);
+            match (p, q) {
                 (Some(p), Some(q)) => {
                     let distance = p.distance + (q.distance - p.distance) * s;
                     // In contact, blend the outward directions as unit vectors, so that the
@@ -151,8 +173,9 @@ pub fn signed_sample(
                 (p, q) => q.or(p),
             }
         }
-        (false, true) => one(&rb, &|| reach() + c.end.field.far_value(), true),
-        (true, false) => one(&ra, &|| reach() + c.end.field.far_value(), true),
+        // One field far: the body moved here by up to the band, or more.
+        (false, true) => one(&rb, &|| reach() + moved(x + b.vector, &f0, far), true),
+        (true, false) => one(&ra, &|| reach() + moved(x + a.vector, &c.end, far), true),
         (false, false) => {
             // Both at the band's edge: the trilinear blends of the cells, far ones included.
             let f = Read {
@@ -169,6 +192,27 @@ pub fn signed_sample(
             one(&f, &reach, false)
         }
     }
+}
+
+/// How far a body moved near the closest point `q` one field gives, as far as a crossing
+/// of it can tell: the other field's distance at `q`, and no more than `jump`, how far the
+/// closest point moved between the two fields. The closest point alone overstates it where
+/// it jumps to another part of the body: a particle in the gap between two ears, nearer one
+/// ear at the frame's start and the other at its end, has its closest point cross the gap,
+/// though neither ear moved; counted as motion, the other ear would read as crossed and the
+/// particle would be pushed through it. Where the surface did sweep past the particle, the
+/// other field's surface lies as far from `q` as the sweep (for a crossing it must be).
+#[inline(always)]
+pub(super) fn moved(q: Vec3, other: &FieldView, jump: f32) -> f32 {
+    other.read(q).sample.distance.min(jump)
+}
+
+/// How much less than its reach a crossing in one field may go where the other field
+/// finds the particle outside by `d`: all of `d`, or all of the reach where the fields'
+/// outward directions disagree (`agree` false).
+#[inline(always)]
+pub(super) fn sweep(d: f32, agree: bool) -> f32 {
+    if agree { d } else { f32::INFINITY }
 }
 
 /// What a contact did to one particle.
@@ -277,6 +321,71 @@ mod tests {
         let (from, mut x) = (Vec3::new(0.0, 0.2, 0.0), Vec3::new(0.0, -0.5, 0.0));
         let hit = respond(&mut x, from, &sig(s), &mut side, eps, 0.0).unwrap();
         assert!(hit.inside && x == from);
+    }
+
+    /// A column of 2 mm cells along y from -1 cm to 6 cm, band 4 cm, from a closest-point
+    /// function: the particles below sit at cell centres, so a read is the cell's own.
+    fn slab(closest: impl Fn(Vec3) -> Vec3) -> imprint_core::DistanceField {
+        let origin = Vec3::new(-0.004, -0.01, -0.004);
+        let spec = imprint_core::GridSpec::new(origin, 0.002, glam::UVec3::new(5, 36, 5));
+        imprint_core::DistanceField::from_closest_points(spec.unwrap(), 20.0, closest)
+    }
+
+    /// The nearer of the planes y = `lo` and y = `hi`: the walls of a gap.
+    fn walls(lo: f32, hi: f32) -> impl Fn(Vec3) -> Vec3 {
+        move |p| Vec3::new(p.x, if p.y - lo <= hi - p.y { lo } else { hi }, p.z)
+    }
+
+    /// A particle in a 5 cm gap, 2.4 cm above its floor, remembers the floor below it. The
+    /// walls move down 2 mm in the frame: the end field finds the ceiling nearer, and its
+    /// vector (up) runs along the memory. The closest point jumped 4.8 cm, the walls moved
+    /// 2 mm: still outside, 2.4 cm from either, and no contact.
+    #[test]
+    fn a_closest_point_jumping_across_a_gap_is_not_a_crossing() {
+        let (start, end) = (slab(walls(0.0, 0.05)), slab(walls(-0.002, 0.048)));
+        let (start, end) = (FieldView::new(&start), FieldView::new(&end));
+        let c = Collider {
+            start: Some(start),
+            end,
+            span: (0.0, 1.0),
+        };
+        let x = Vec3::new(0.0, 0.024, 0.0);
+        let side = Vec4::new(0.0, 0.024, 0.0, 1.0);
+        let eps = 0.008;
+        for s in [0.1, 0.5, 0.9] {
+            let got = signed_sample(&c, x, x, s, side, eps).unwrap();
+            assert!((got.distance - 0.024).abs() < 1e-4, "s {s}: {got:?}");
+            assert!(got.outward.y > 0.0 || s > 0.5, "s {s}: {got:?}");
+        }
+    }
+
+    /// A floor rising 3 cm in a frame sweeps past a particle 1.2 cm above it: the end field
+    /// finds it 1.8 cm inside (its vector up, along the memory), and the blend says inside
+    /// from halfway through the frame; pushed up, out of the floor.
+    #[test]
+    fn a_surface_that_swept_past_a_particle_is_a_crossing() {
+        let floor = |h: f32| move |p: Vec3| Vec3::new(p.x, h, p.z);
+        let (start, end) = (slab(floor(0.0)), slab(floor(0.03)));
+        let (start, end) = (FieldView::new(&start), FieldView::new(&end));
+        let c = Collider {
+            start: Some(start),
+            end,
+            span: (0.0, 1.0),
+        };
+        let x = Vec3::new(0.0, 0.012, 0.0);
+        let mut side = Vec4::new(0.0, 0.012, 0.0, 1.0);
+        let eps = 0.008;
+        let got = signed_sample(&c, x, x, 0.6, side, eps).unwrap();
+        assert!(
+            (got.distance - (0.012 - 0.03 * 0.6)).abs() < 1e-4,
+            "{got:?}"
+        );
+        let mut y = x;
+        let hit = respond(&mut y, x, &got, &mut side, eps, 0.0).unwrap();
+        assert!(
+            hit.inside && (y.y - (0.018 + eps)).abs() < 1e-4,
+            "{y} {hit:?}"
+        );
     }
 
     fn sig((distance, outward): (f32, Vec3)) -> Signed {

@@ -15,8 +15,10 @@
 //! [`contact::signed_sample`]: super::contact::signed_sample
 //! [`contact::respond`]: super::contact::respond
 
+use super::contact;
 use super::lanes::LANES;
 use super::sampler::{Corners, FieldView};
+use glam::Vec3;
 
 type Lanes = [f32; LANES];
 
@@ -188,16 +190,63 @@ fn signed_lanes(
         Some((start, s)) => {
             let cells = start_cells.as_ref().expect("computed with start");
             let (da, va, ia) = start.sample_lanes(&t.x, cells, start_corners);
-            let far = end.field.far_value();
+            let motion = turned_motion(t, (start, &va, ia), (end, &vb, ib));
             for m in 0..LANES {
                 let (a, b) = ((da[m], lane(&va, m)), (db[m], lane(&vb, m)));
+                let own = reach(m);
+                let moved = [own + motion[0][m], own + motion[1][m]];
                 let ((p, d, o), band_miss) =
-                    blend(a, ia[m], b, ib[m], s, side(m), reach(m), far, eps);
+                    blend(a, ia[m], b, ib[m], s, side(m), (own, moved), eps);
                 (out.some[m], out.distance[m], out.outward[m], out.miss[m]) = (p, d, o, band_miss);
             }
         }
     }
     Some(out)
+}
+
+/// For the lanes whose vector in a field's band turned round against their memory
+/// (`[start, end]`, by lane): [`contact::moved`] at that field's closest point, a read of
+/// the other field, no more than the closest point's jump (or than the band, where the
+/// other field is far). Rare (a few lanes of a few blocks), so read one at a time; zero
+/// elsewhere, where the reading does not depend on it.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn turned_motion(
+    t: &Touch,
+    (start, va, ia): (&FieldView, &[Lanes; 3], [bool; LANES]),
+    (end, vb, ib): (&FieldView, &[Lanes; 3], [bool; LANES]),
+) -> [Lanes; 2] {
+    let along = |v: &[Lanes; 3], m: usize| {
+        v[0][m] * t.side[0][m] + v[1][m] * t.side[1][m] + v[2][m] * t.side[2][m]
+    };
+    let mut turned = [[false; LANES]; 2];
+    for m in 0..LANES {
+        let known = t.side[3][m] > 0.0;
+        turned[0][m] = known & ia[m] & (along(va, m) > 0.0);
+        turned[1][m] = known & ib[m] & (along(vb, m) > 0.0);
+    }
+    let mut motion = [[0.0; LANES]; 2];
+    for m in (0..LANES).filter(|&m| turned[0][m] | turned[1][m]) {
+        let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
+        let (a, b) = (lane_vec3(va, m), lane_vec3(vb, m));
+        let jump = if ia[m] & ib[m] {
+            (b - a).length()
+        } else {
+            end.field.far_value()
+        };
+        if turned[0][m] {
+            motion[0][m] = contact::moved(x + a, end, jump);
+        }
+        if turned[1][m] {
+            motion[1][m] = contact::moved(x + b, start, jump);
+        }
+    }
+    motion
+}
+
+#[inline(always)]
+fn lane_vec3(v: &[Lanes; 3], m: usize) -> Vec3 {
+    Vec3::new(v[0][m], v[1][m], v[2][m])
 }
 
 /// The signed distance [`super::contact::signed_sample`] gives at each lane's position `x`
@@ -280,7 +329,8 @@ fn classify(d: f32, v: [f32; 3], side: [f32; 4], reach: f32) -> Signed {
 
 /// `contact::signed_sample`'s blend of the two fields' samples `a` (start) and `b` (end),
 /// each (distance, vector) and whether in the band, at weight `s`: also whether the blend
-/// mixed a far field with a near one (a band miss).
+/// mixed a far field with a near one (a band miss). `reach` is the particle's own, then per
+/// field with the body's motion added ([`turned_motion`]).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn blend(
@@ -290,19 +340,26 @@ fn blend(
     b_in: bool,
     s: f32,
     side: [f32; 4],
-    reach: f32,
-    far: f32,
+    (reach, moved): (f32, [f32; 2]),
     eps: f32,
 ) -> (Signed, bool) {
     let mix = |p: f32, q: f32| p + (q - p) * s;
     match (a_in, b_in) {
         (true, true) => {
-            // How far the body moved here between the two fields: its closest point did.
-            let reach = reach + length(each(|k| b.1[k] - a.1[k]));
-            let (p, q) = (
-                classify(a.0, a.1, side, reach),
-                classify(b.0, b.1, side, reach),
+            let (p0, q0) = (
+                classify(a.0, a.1, side, moved[0]),
+                classify(b.0, b.1, side, moved[1]),
             );
+            let agree = a.1[0] * b.1[0] + a.1[1] * b.1[1] + a.1[2] * b.1[2] < 0.0;
+            let outside = |r: Signed| {
+                if r.0 & (r.1 >= 0.0) {
+                    contact::sweep(r.1, agree)
+                } else {
+                    0.0
+                }
+            };
+            let p = classify(a.0, a.1, side, moved[0] - outside(q0));
+            let q = classify(b.0, b.1, side, moved[1] - outside(p0));
             let distance = mix(p.1, q.1);
             // In contact the outward directions are blended as unit vectors.
             let unit = |o: [f32; 3]| {
@@ -318,8 +375,8 @@ fn blend(
             let one = if q.0 { q } else { p };
             (if p.0 & q.0 { both } else { one }, false)
         }
-        (false, true) => (classify(b.0, b.1, side, reach + far), true),
-        (true, false) => (classify(a.0, a.1, side, reach + far), true),
+        (false, true) => (classify(b.0, b.1, side, moved[1]), true),
+        (true, false) => (classify(a.0, a.1, side, moved[0]), true),
         (false, false) => {
             // Both at the band's edge: the blends of the cells' trilinear samples.
             let v = each(|k| mix(a.1[k], b.1[k]));
