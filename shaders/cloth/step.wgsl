@@ -213,7 +213,11 @@ fn sample_field(slot: u32, p: vec3<f32>) -> Sample {
         }
     }
     if !far {
-        return Sample(length(acc.xyz), acc.xyz, true, signed, sd);
+        // DistanceField::vector_distance: the vector's length, or the bound from the blended
+        // distances where longer (near the middle of a gap).
+        let spread = t.x * (1.0 - t.x) + t.y * (1.0 - t.y) + t.z * (1.0 - t.z);
+        let bound = dist - h.origin.w * sqrt(spread);
+        return Sample(max(length(acc.xyz), bound), acc.xyz, true, signed, sd);
     }
     return Sample(dist, acc.xyz, false, signed, sd);
 }

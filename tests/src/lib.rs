@@ -94,10 +94,8 @@ pub mod cloth {
     /// A cloth falling into the 6 cm gap between two spheres (radius [`gap::R`]) that move
     /// sideways at 0.6 m/s, 1 cm per frame at 60 fps: well within the band (4 cm, 5 mm
     /// cells). A particle in the gap is nearer one sphere in one frame's field and the other
-    /// in the next. One grid covers 40 frames, the gap's middle on its cell centres every
-    /// frame: within a cell of the middle, a read blends the cells' vectors to both spheres
-    /// into one shorter than either distance (a limit of the vector sampling, BENCHMARKS'
-    /// notes), which this scene is not about.
+    /// in the next, and within a cell of the gap's middle the cells' vectors point to
+    /// different spheres. Each frame's grid moves with the spheres.
     pub mod gap {
         use super::*;
 
@@ -116,8 +114,9 @@ pub mod cloth {
         /// The spheres' field at frame `f` (an open body's: unsigned).
         pub fn field(f: u32) -> DistanceField {
             let (a, b) = centres(f);
-            let (lo, cell) = (Vec3::new(-0.32, -0.17, -0.17), 0.005);
-            let dims = UVec3::new(211, 69, 69);
+            // The gap's middle on a face between cells: the blend there is at its shortest.
+            let lo = Vec3::new(-0.3225, -0.17, -0.1711) + (a + b) / 2.0;
+            let (cell, dims) = (0.005, UVec3::new(129, 69, 69));
             let spec = GridSpec::new(lo, cell, dims).unwrap();
             let on = |c: Vec3, p: Vec3| c + R * (p - c).try_normalize().unwrap_or(Vec3::Y);
             DistanceField::from_closest_points(spec, 8.0, |p| {

@@ -441,3 +441,41 @@ fn assert_far_bricks_hold(f: &imprint_core::DistanceField, what: &str) {
         "{what}: {skipped} reads skipped of {plainly_far} plainly far"
     );
 }
+
+/// Near the middle of a gap the cells' vectors point to different walls and their blend is
+/// short; sampling "A" then reads the lower bound from the blended distances instead
+/// (`vector_distance`): never more than the exact distance, and short of it by no more than
+/// twice the spread (the blend of the corners' distances is within one spread of the exact
+/// distance, and the bound one spread below that): √3 cells at most, where the vector's
+/// length alone fell to a tenth of the distance or less.
+#[test]
+fn in_the_middle_of_a_gap_a_reads_no_shorter_than_its_bound() {
+    let spec = GridSpec::new(Vec3::splat(-0.1), 0.01, UVec3::new(21, 21, 21)).unwrap();
+    // Walls y = -0.025 and y = 0.035: the gap's middle, y = 0.005, lies on a face between
+    // cells (their centres are at whole centimetres).
+    let mid = 0.005;
+    let walls = |p: Vec3| Vec3::new(p.x, if p.y < mid { -0.025 } else { 0.035 }, p.z);
+    let f = DistanceField::from_closest_points(spec, 4.0, walls);
+    let mut worst_len: f32 = 1.0;
+    for k in 0..=20 {
+        let y = mid - 0.005 + 0.0005 * k as f32;
+        let p = Vec3::new(0.0012, y, -0.0031);
+        let exact = 0.03 - (y - mid).abs();
+        let a = f.sample(p, Sampling::Vector);
+        assert!(a.in_band, "{p}");
+        assert!(
+            a.distance <= exact + 1e-6,
+            "{p}: {} > exact {exact}",
+            a.distance
+        );
+        let worst = 3.0f32.sqrt() * spec.cell;
+        assert!(
+            a.distance >= exact - worst,
+            "{p}: {} vs {exact}",
+            a.distance
+        );
+        worst_len = worst_len.min(a.vector.length() / exact);
+    }
+    // The vector's length alone: down to zero on the face between the cells.
+    assert!(worst_len < 0.1, "{worst_len}");
+}

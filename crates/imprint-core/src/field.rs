@@ -73,10 +73,26 @@ impl Boundary {
     }
 }
 
+/// The distance [`Sampling::Vector`] reads where the 8 corners are in the band: the blended
+/// vector's length `len`, or, where longer, a lower bound from the corners' blended distance
+/// `dist` at fraction `t` of a cell of side `cell`. Near the middle of a gap (or any medial
+/// surface) the corners' vectors point to different walls and their blend is shorter than
+/// either distance: 4.8 mm read where the nearer wall was 24 mm away, a false contact. Since a
+/// distance changes by no more than the distance moved, each corner bounds the distance at
+/// the point from below, and so does their blend less the mean corner distance, at most
+/// `cell * sqrt(Σ t(1 - t))`. Near a surface the vector's length is the larger (the bound is
+/// ≤ 0 on it), so a plane still reads exactly. Beyond H.
+#[inline(always)]
+pub fn vector_distance(len: f32, dist: f32, cell: f32, t: Vec3) -> f32 {
+    let spread = t.x * (1.0 - t.x) + t.y * (1.0 - t.y) + t.z * (1.0 - t.z);
+    len.max(dist - cell * spread.sqrt())
+}
+
 /// How a field is read between cell centres (H Fig. 5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Sampling {
-    /// "A": trilinear blend of the closest-point vectors, distance = its length (exact on a plane).
+    /// "A": trilinear blend of the closest-point vectors, distance = its length (exact on a plane),
+    /// or [`vector_distance`]'s lower bound where that is longer (near the middle of a gap).
     #[default]
     Vector,
     /// "B": trilinear blend of the distances (not exact: distance is not linear between cells).
@@ -540,7 +556,7 @@ impl DistanceField {
         }
         match mode {
             Sampling::Vector if all_in => FieldSample {
-                distance: vec.length(),
+                distance: vector_distance(vec.length(), dist, self.spec.cell, t),
                 vector: vec,
                 in_band: true,
             },

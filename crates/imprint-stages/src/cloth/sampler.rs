@@ -12,7 +12,7 @@
 
 use super::lanes::LANES;
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
-use imprint_core::field::FarBricks;
+use imprint_core::field::{FarBricks, vector_distance};
 use imprint_core::{DistanceField, FieldSample, Sampling};
 
 /// A field and its cells, looked up once per frame.
@@ -168,10 +168,14 @@ impl<'a> FieldView<'a> {
                 far[m] |= cw[k][m] < 0.0;
             }
         }
-        // In the band: the vector's length (`finish`); at its edge: the blend of distances.
+        // In the band: the vector's length or the bound (`finish`); at its edge: the blend of
+        // distances.
+        let cell = self.field.spec.cell;
         for m in 0..LANES {
             let len = (v[0][m] * v[0][m] + v[1][m] * v[1][m] + v[2][m] * v[2][m]).sqrt();
-            dist[m] = if far[m] { dist[m] } else { len };
+            let t = Vec3::new(t[0][m], t[1][m], t[2][m]);
+            let inside = vector_distance(len, dist[m], cell, t);
+            dist[m] = if far[m] { dist[m] } else { inside };
         }
         let mut in_band = far.map(|far| !far);
         for m in (0..LANES).filter(|&m| !inner[m]) {
@@ -270,10 +274,11 @@ impl<'a> FieldView<'a> {
         }
         // xyz: the blended vector, lane by lane as the field adds it; w unused here.
         let mut acc = Vec4::ZERO;
-        let mut far = false;
+        let (mut far, mut dist) = (false, 0.0);
         for k in 0..8 {
             acc += weights[k] * corners[k];
             far |= corners[k].w < 0.0;
+            dist += weights[k] * corners[k].w.abs();
         }
         let vec = acc.truncate();
         // The signed distance in the field's order of corners (as `DistanceField::side`).
@@ -291,18 +296,8 @@ impl<'a> FieldView<'a> {
             }
             sd
         });
-        if !far {
-            return Read {
-                sample: finish(0.0, vec, true),
-                side,
-            };
-        }
-        let mut dist = 0.0;
-        for k in 0..8 {
-            dist += weights[k] * corners[k].w.abs();
-        }
         Read {
-            sample: finish(dist, vec, false),
+            sample: finish(dist, vec, !far, spec.cell, t),
             side,
         }
     }
@@ -352,11 +347,12 @@ fn cell_coords(spec: &imprint_core::GridSpec, p: Vec3) -> (IVec3, Vec3) {
     (b, (c - floor).into())
 }
 
+/// A sample from its blended distance and vector at fraction `t` of a cell of side `cell`.
 #[inline(always)]
-fn finish(dist: f32, vec: Vec3, all_in: bool) -> FieldSample {
+fn finish(dist: f32, vec: Vec3, all_in: bool, cell: f32, t: Vec3) -> FieldSample {
     if all_in {
         FieldSample {
-            distance: vec.length(),
+            distance: vector_distance(vec.length(), dist, cell, t),
             vector: vec,
             in_band: true,
         }
@@ -415,7 +411,7 @@ pub fn sample_vector(field: &DistanceField, p: Vec3) -> FieldSample {
             }
         }
     }
-    finish(dist, vec, all_in)
+    finish(dist, vec, all_in, spec.cell, t)
 }
 
 #[cfg(test)]
