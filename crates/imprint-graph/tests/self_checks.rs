@@ -437,3 +437,47 @@ fn shipped_drape_and_skin_pipelines_trip_no_check() {
         assert_eq!(tripped(&r), Vec::<String>::new(), "{name}");
     }
 }
+
+/// A sphere rising 25 mm a frame under a cloth, its field's band 1 cell (about 21 mm): the
+/// blend of two frames' fields reads one far and one near, counted as band misses, and the
+/// report says once how to fix it. With band 4 there are none, and no warning.
+#[test]
+fn a_band_narrower_than_the_motion_is_warned_of() {
+    let scene = |band: u32| {
+        plan(
+            24,
+            &format!(
+                r#""ball": Mesh(primitive: Sphere(radius: 0.3, segments: 32, rings: 16),
+                       motion: [Rigid(keys: [(time: 0), (time: 1, translate: (0, 0.6, 0))])]),
+           "vox": Voxelize(mesh: "ball", grid: Fit(resolution: 48)),
+           "field": DistanceField(boundary: "vox", band: {band}, measure: Never),
+           "cloth": Cloth(colliders: ["field"], params: (
+               shape: Grid(size: (0.8, 0.8), resolution: (12, 12), center: (0, 0.32, 0)),
+               material: Harada(k_structural: 20.0, k_shear: 5.0),
+               pins: [Indices([0, 11, 132, 143])],
+               collision: (epsilon: 0.01, friction: 0.3),
+               substeps: 16)),
+           "m": WriteMesh(mesh: "cloth", every: 100),"#
+            ),
+        )
+    };
+    for (band, misses) in [(1, true), (4, false)] {
+        let dir = tempfile::tempdir().unwrap();
+        let r = run(&scene(band), &opts(dir.path(), 0..12), &mut |_, _| {}).unwrap();
+        let n: u64 = per_frame(&r, "cloth")
+            .iter()
+            .map(|f| f["band_misses"].as_u64().unwrap())
+            .sum();
+        let w = node_warnings(&r, "cloth");
+        let warned: Vec<_> = w.iter().filter(|w| w.contains("band misses")).collect();
+        assert_eq!(n > 0, misses, "band {band}: {n} band misses");
+        assert_eq!(warned.len(), misses as usize, "band {band}: {w:?}");
+        if misses {
+            assert!(
+                warned[0].contains("widen the field's `band`"),
+                "{}",
+                warned[0]
+            );
+        }
+    }
+}

@@ -233,6 +233,7 @@ impl Stage for ClothStage {
             Some(g) => step_gpu(g, &mut self.sim, &self.colliders, ctx)?,
             None => self.step_cpu(ctx)?,
         };
+        self.warn_band_misses(ctx, &m);
         ctx.push_per_frame(m);
         ctx.metric("particles", self.sim.len());
         Ok(Step::computed(Value::Mesh(Arc::new(self.sim.to_mesh()))))
@@ -358,6 +359,26 @@ impl ClothStage {
             }
         }
         Ok(())
+    }
+
+    /// A contact that blended a field far from the particle with a near one (a band miss)
+    /// means the body moved farther between two fields than their band less ε, and the near
+    /// field was read alone: particles can be left inside. The metrics count them per frame;
+    /// said once, with the fix.
+    fn warn_band_misses(&self, ctx: &mut FrameCtx<'_>, m: &serde_json::Value) {
+        let Some(n) = m["band_misses"].as_u64().filter(|&n| n > 0) else {
+            return;
+        };
+        let eps = self.sim.params().collision.epsilon;
+        ctx.warn_once("band misses", || {
+            format!(
+                "{n} contacts read one collider field alone because the other was far from the \
+                 particle: between two fields the body moved farther than the band less ε \
+                 (ε = {:.1} mm), so particles can be left inside; widen the field's `band` (to \
+                 more than ε plus a frame's motion) or build the field more often",
+                eps * 1e3
+            )
+        });
     }
 
     /// One frame on the CPU: per collider, the two fields the frame blends between and its
