@@ -16,7 +16,7 @@
 //! [`contact::respond`]: super::contact::respond
 
 use super::contact;
-use super::lanes::LANES;
+use super::lanes::{LANES, lane_vec};
 use super::sampler::{Corners, FieldView};
 use glam::Vec3;
 
@@ -228,7 +228,7 @@ fn turned_motion(
     let mut motion = [[0.0; LANES]; 2];
     for m in (0..LANES).filter(|&m| turned[0][m] | turned[1][m]) {
         let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
-        let (a, b) = (lane_vec3(va, m), lane_vec3(vb, m));
+        let (a, b) = (lane_vec(va, m), lane_vec(vb, m));
         let jump = if ia[m] & ib[m] {
             (b - a).length()
         } else {
@@ -242,11 +242,6 @@ fn turned_motion(
         }
     }
     motion
-}
-
-#[inline(always)]
-fn lane_vec3(v: &[Lanes; 3], m: usize) -> Vec3 {
-    Vec3::new(v[0][m], v[1][m], v[2][m])
 }
 
 /// The signed distance [`super::contact::signed_sample`] gives at each lane's position `x`

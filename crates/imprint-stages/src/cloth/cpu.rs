@@ -13,7 +13,7 @@
 
 use super::contact::{self, Collider, Hit};
 use super::contact_lanes::{self, Fields, Touch};
-use super::lanes::{Blocks, LANES, Lane, Lanes};
+use super::lanes::{Blocks, LANES, Lane, Lanes, lane_vec};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::{Corners, FieldView};
@@ -1193,12 +1193,6 @@ fn step_block(
     }
     block_stats(first, &x, &moved, &xn, &live, st);
     xn
-}
-
-/// Lane `m` of a block's positions.
-#[inline(always)]
-fn lane_vec(v: &[Lane; 3], m: usize) -> Vec3 {
-    Vec3::new(v[0][m], v[1][m], v[2][m])
 }
 
 /// [`contact::ground`] for a block's live lanes, computed for all and selected.

@@ -25,6 +25,12 @@ pub const LANES: usize = 8;
 /// One value per particle of a block.
 pub type Lane = [f32; LANES];
 
+/// Lane `m` of a block's vectors, stored by axis.
+#[inline(always)]
+pub fn lane_vec(v: &[Lane; 3], m: usize) -> Vec3 {
+    Vec3::new(v[0][m], v[1][m], v[2][m])
+}
+
 /// Lengths below this count as zero when normalising a spring (as in `cpu`).
 const TINY: f32 = 1e-20;
 
