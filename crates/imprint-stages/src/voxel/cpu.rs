@@ -148,35 +148,44 @@ impl Voxelizer {
 }
 
 /// The triangles of each slab, in increasing index (a counting sort by slab).
-struct SlabBins {
+pub(crate) struct SlabBins {
     start: Vec<usize>,
     tris: Vec<u32>,
 }
 
 impl SlabBins {
+    /// The voxeliser's bins: a triangle reaches the z-layers of its candidate cells.
     fn new(spec: &GridSpec, verts: &[Vec3], mesh: &Mesh) -> Self {
-        let slabs = (spec.dims.z as usize).div_ceil(SLAB_LAYERS);
         let nz = spec.dims.z as i32;
-        // Each triangle's slab range: the z of its candidate cells (empty off the grid).
-        let ranges: Vec<(u32, u32)> = mesh
+        let layers: Vec<(i32, i32)> = mesh
             .triangles
             .par_iter()
             .map(|t| {
                 let z = t.map(|i| verts[i as usize].z);
                 let lo = ceil_i(z[0].min(z[1]).min(z[2]) - CELL_HALF).max(0);
                 let hi = floor_i(z[0].max(z[1]).max(z[2]) + CELL_HALF).min(nz - 1);
-                if lo > hi {
-                    (1, 0)
-                } else {
-                    let l = SLAB_LAYERS as i32;
-                    ((lo / l) as u32, (hi / l) as u32)
-                }
+                (lo, hi)
             })
             .collect();
+        Self::by_layers(spec.dims.z as usize, SLAB_LAYERS, &layers)
+    }
+
+    /// Triangle `t` in every slab of `per_slab` of the `nz` z-layers that `layers[t]` (first,
+    /// last, within `0..nz`; first > last: none) reaches.
+    pub(crate) fn by_layers(nz: usize, per_slab: usize, layers: &[(i32, i32)]) -> Self {
+        let slabs = nz.div_ceil(per_slab);
+        let l = per_slab as i32;
+        let range = |&(lo, hi): &(i32, i32)| {
+            if lo > hi {
+                0..0
+            } else {
+                (lo / l) as usize..(hi / l) as usize + 1
+            }
+        };
         let mut start = vec![0usize; slabs + 1];
-        for &(lo, hi) in &ranges {
-            for s in lo..=hi {
-                start[s as usize + 1] += 1;
+        for r in layers {
+            for s in range(r) {
+                start[s + 1] += 1;
             }
         }
         for s in 0..slabs {
@@ -184,16 +193,17 @@ impl SlabBins {
         }
         let mut fill = start.clone();
         let mut tris = vec![0u32; start[slabs]];
-        for (t, &(lo, hi)) in ranges.iter().enumerate() {
-            for s in lo..=hi {
-                tris[fill[s as usize]] = t as u32;
-                fill[s as usize] += 1;
+        for (t, r) in layers.iter().enumerate() {
+            for s in range(r) {
+                tris[fill[s]] = t as u32;
+                fill[s] += 1;
             }
         }
         SlabBins { start, tris }
     }
 
-    fn of(&self, slab: usize) -> &[u32] {
+    /// The triangles of slab `slab`, in increasing index.
+    pub(crate) fn of(&self, slab: usize) -> &[u32] {
         &self.tris[self.start[slab]..self.start[slab + 1]]
     }
 }

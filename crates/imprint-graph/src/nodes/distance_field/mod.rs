@@ -13,7 +13,6 @@ use crate::schedule::Schedule;
 use crate::schema::defaults;
 use crate::value::{BoundaryIn, BoundaryValue, FieldData, FieldValue, MeshIn, Value, Values};
 use builds::{Ahead, BuildState, FieldSchedule, Published};
-use imprint_core::bvh::Bvh;
 use imprint_core::{DistanceField, Error, Mesh};
 use imprint_gpu::GpuContext;
 use imprint_stages::mesh::{MeshParams, MeshSource};
@@ -415,7 +414,7 @@ impl FieldStage {
         field: &DistanceField,
         mesh: &Mesh,
     ) -> imprint_core::Result<()> {
-        let err = imprint_stages::metrics::field_error_with(field, &Bvh::new(mesh));
+        let err = imprint_stages::metrics::field_error(field, mesh);
         self.measured += 1;
         let worst = ctx
             .report
