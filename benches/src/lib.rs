@@ -192,7 +192,8 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
 }
 
 /// GPU voxelise + field times (wall clock around submit and wait) when an adapter exists, with
-/// the error of the read-back field; on a software adapter the grid is smaller (it is slow).
+/// the error of the read-back field: on a GPU at 128³ and 256³ (issue 5/7's figures), on a
+/// software adapter at 64³ only (it is slow).
 pub fn gpu_table(root: &Path, repeat: usize) -> String {
     use imprint_stages::sdf::gpu::build_field_gpu;
     use imprint_stages::voxel::gpu::voxelize_gpu;
@@ -204,7 +205,11 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
             return s;
         }
     };
-    let res = if ctx.is_software() { 64 } else { 128 };
+    let grids: &[u32] = if ctx.is_software() {
+        &[64]
+    } else {
+        &[128, 256]
+    };
     let repeat = if ctx.is_software() {
         repeat.min(3)
     } else {
@@ -212,17 +217,21 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
     };
     let _ = writeln!(
         s,
-        "Adapter: {}. Grid {res}³ fitted as in table 1, a = 3, Closest; times are wall clock \
-         from submit to completion (median of {repeat}), read-back excluded; error of the read-back \
-         field against the exact distance.\n",
+        "Adapter: {}. Grids fitted as in table 1 (the cells along the box's longest side), a = \
+         3, Closest; times are wall clock from submit to completion (median of {repeat}), \
+         read-back excluded; error of the read-back field against the exact distance.\n",
         adapter_label(ctx),
     );
     let _ = writeln!(
         s,
-        "| mesh | voxelise ms | field ms | total ms | CPU total ms (same grid) | p99 err | max err |"
+        "| mesh | grid | voxelise ms | field ms | total ms | CPU total ms (same grid) | p99 err | max err |"
     );
-    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|");
-    for name in ["teapot", "stanford-bunny", "cow"] {
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
+    let meshes = ["teapot", "stanford-bunny", "cow"];
+    for (&res, name) in grids
+        .iter()
+        .flat_map(|r| meshes.iter().map(move |m| (r, m)))
+    {
         let mesh = Mesh::load_obj(&root.join(format!("assets/meshes/{name}.obj"))).expect("mesh");
         let spec = GridSpec::fit(&mesh.bounds(), res, 0.1).expect("grid");
         let variant = imprint_core::BoundaryVariant::Closest;
@@ -256,7 +265,7 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
         let Some(field) = last.filter(|_| failed.is_none()) else {
             let _ = writeln!(
                 s,
-                "| {name} | failed: {} | | | | | |",
+                "| {name} | {res}³ | failed: {} | | | | | |",
                 failed.map_or(String::new(), |e| e.to_string())
             );
             continue;
@@ -284,7 +293,7 @@ pub fn gpu_table(root: &Path, repeat: usize) -> String {
         });
         let _ = writeln!(
             s,
-            "| {name} | {v:.2} | {f:.2} | {:.2} | {cpu:.2} | {p99} | {max} |",
+            "| {name} | {res}³ | {v:.2} | {f:.2} | {:.2} | {cpu:.2} | {p99} | {max} |",
             v + f
         );
     }

@@ -56,6 +56,33 @@ fn run(
     split: u32,
     interpolate: bool,
 ) -> Result<(Report, ClothFrames), String> {
+    run_on(
+        root,
+        every,
+        split,
+        interpolate,
+        imprint_graph::schema::Backend::Cpu,
+    )
+}
+
+/// The benchmark cloth's every-frame run on `backend` (§12's GPU row): the mean ms per frame
+/// over frames 1… and the cloth's particles after the last frame.
+pub fn every_frame_on(
+    root: &Path,
+    backend: imprint_graph::schema::Backend,
+) -> Result<(f64, Vec<glam::Vec3>), String> {
+    let (report, cloth) = run_on(root, 1, 1, false, backend)?;
+    let last = cloth.0.last().cloned().ok_or("the cloth gave no frame")?;
+    Ok((mean_max(&report.frame_ms).0, last))
+}
+
+fn run_on(
+    root: &Path,
+    every: u32,
+    split: u32,
+    interpolate: bool,
+    backend: imprint_graph::schema::Backend,
+) -> Result<(Report, ClothFrames), String> {
     let mut sets: Vec<String> = CLOTH.iter().map(|s| s.to_string()).collect();
     if every == 0 {
         sets.push(
@@ -77,7 +104,7 @@ fn run(
     let dir = tempfile::tempdir().expect("temp dir");
     let opts = RunOptions {
         out: dir.path().to_path_buf(),
-        backend: Some(imprint_graph::schema::Backend::Cpu),
+        backend: Some(backend),
         ..Default::default()
     };
     let mut cloth = ClothFrames::default();

@@ -2,13 +2,14 @@
 //! CPU, on the same scene in the same run, with how far the two paths' outputs end apart.
 //!
 //! - Cloth: the sphere drop of `tests/tests/gpu_cloth.rs` (`imprint_tests::cloth`) at 32² and
-//!   128² particles, `GpuCloth::step_frame` against `ClothSim::step_frame`.
+//!   128² particles (and 256² on a GPU), `GpuCloth::step_frame` against `ClothSim::step_frame`.
 //! - Ground: §8's rolling sphere on 256² cells, `GpuGround::step_resident` (the Ground
 //!   node's GPU path) against `GroundSim::step`, with Settle (the default) and Labelled.
 //! - Snow: §8's snow scene, `SnowSim::step_with_parts` with the GPU arrival and
 //!   stabilisation (the Snow node's GPU path) against `SnowSim::step`.
 //! - Skinning: §11's limb and rig, `GpuBlend` (LBS, DQS) and `GpuParticleSkin` against
 //!   `blend::lbs` / `blend::dqs` and `ParticleSkin`.
+//! - H's scene through the executor, on a GPU only: §7's every-frame run on each backend.
 //!
 //! Both paths are stepped in turn, frame by frame, so they see the same frames; a frame's
 //! GPU time is the wall clock around the stage's call, which submits and waits for the GPU.
@@ -121,13 +122,23 @@ pub fn section(root: &Path, repeat: usize) -> String {
     );
     let _ = writeln!(s, "|---|---|---:|---:|---:|---|---|");
     let mut rows: Vec<(&str, Result<Row>)> = Vec::new();
-    for n in [32, 128] {
+    // 256² on a GPU only (issue 5/7's figure): a software adapter takes seconds a frame.
+    let cloths: &[u32] = if ctx.is_software() {
+        &[32, 128]
+    } else {
+        &[32, 128, 256]
+    };
+    for &n in cloths {
         rows.push(("cloth", cloth_row(ctx, n, repeat)));
     }
     for relaxation in [Relaxation::Settle, Relaxation::Labelled] {
         rows.push(("ground", ground_row(ctx, relaxation, repeat)));
     }
     rows.push(("snow", snow_row(ctx, repeat)));
+    if !ctx.is_software() {
+        // 72 frames of 128³ builds: minutes on a software adapter.
+        rows.push(("H's scene", harada_row(root)));
+    }
     rows.extend(skin_rows(root, ctx, repeat));
     for (stage, row) in rows {
         let line = match row {
@@ -147,6 +158,32 @@ pub fn section(root: &Path, repeat: usize) -> String {
         let _ = writeln!(s, "{line}");
     }
     s
+}
+
+/// H's scene through the executor (§7's every-frame run: the bunny's 128³ field rebuilt every
+/// frame, §6.2's benchmark cloth), on the GPU backend and on the CPU: mean ms per frame over
+/// frames 1… of one run each (not a median: the frames differ), the render switched off.
+fn harada_row(root: &Path) -> Result<Row> {
+    use imprint_graph::schema::Backend;
+    let fail = |e: String| imprint_core::Error::Invalid(format!("H's scene: {e}"));
+    let (cpu_ms, cpu) = crate::schedule::every_frame_on(root, Backend::Cpu).map_err(fail)?;
+    let (gpu_ms, gpu) = crate::schedule::every_frame_on(root, Backend::Gpu).map_err(fail)?;
+    Ok(Row {
+        stage: "H's scene",
+        scene: "`pipelines/harada_cloth.ron`, 72 frames, field every frame, 16 substeps, \
+                springs halved (§7's every-frame run), render off"
+            .into(),
+        cpu_ms,
+        gpu_ms,
+        covers: "the executor's frame: mesh motion, voxelise, field, cloth, the GPU's \
+                 read-backs for the cloth's mesh each frame"
+            .into(),
+        error: format!(
+            "{:.1e} m (particle positions after the last frame; the cloth's chaos carries \
+             rounding far, §7)",
+            max_distance(&gpu, &cpu)
+        ),
+    })
 }
 
 /// The section's reading: the adapter, how frames are timed, what the error is.
