@@ -142,8 +142,8 @@ fn ball(r: f32, limit: f32, h: f32) -> f32 {
 
 /// The cells along `axis` whose centres lie within `r` of `c` (first, last).
 fn index_range(spec: &GridSpec, axis: usize, c: f32, r: f32) -> (i32, i32) {
-    // A multiplication, not a division (half the rows' time): the ranges only need to hold the
-    // cells [`grow`] keeps, and its margin is far above the difference.
+    // A multiplication, not a division (one per row): the ranges only need to hold the cells
+    // [`grow`] keeps, and its margin is far above the difference.
     let (o, inv) = (spec.origin[axis], 1.0 / spec.cell);
     let (lo, hi) = ((c - r - o) * inv, (c + r - o) * inv);
     // `ceil` and `floor` without their library calls (x86-64's baseline has no rounding
@@ -409,8 +409,8 @@ mod tests {
     }
 
     /// Small triangles and large ones (a box's two per face, wider than the grid), a mesh
-    /// reaching past the grid's sides, bands of one and four cells, cells not cubes of the
-    /// origin's multiples.
+    /// reaching past the grid's sides, bands of one and four cells, on a grid whose dimensions
+    /// differ per axis and whose origin is no multiple of its cell.
     #[test]
     fn splat_gives_the_queries_numbers() {
         let spec = GridSpec::new(Vec3::splat(-0.47), 0.031, glam::UVec3::new(31, 29, 27)).unwrap();
