@@ -25,8 +25,7 @@ impl Mesh {
     pub fn is_closed(&self) -> bool {
         use rayon::slice::ParallelSliceMut;
         // Each vertex as the first index with its position, bit for bit: an edge of these ids
-        // is an edge by position, and pairs of ids sort several times faster than pairs of
-        // positions (one sort of the vertices, then one of the edges).
+        // is an edge by position, and ids bucket where positions would have to be sorted.
         let key = |i: u32| self.positions[i as usize].to_array().map(f32::to_bits);
         let mut order: Vec<u32> = (0..self.positions.len() as u32).collect();
         order.par_sort_unstable_by_key(|&i| (key(i), i));
@@ -36,17 +35,36 @@ impl Mesh {
                 canon[i as usize] = run[0];
             }
         }
-        let mut edges: Vec<(u32, u32)> = self
-            .triangles
-            .iter()
-            .flat_map(|t| {
-                let [a, b, c] = t.map(|i| canon[i as usize]);
-                [(a, b), (b, c), (c, a)]
-            })
-            .map(|(a, b)| (a.min(b), a.max(b)))
-            .collect();
-        edges.par_sort_unstable();
-        edges.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
+        // The edges bucketed by their smaller end (a counting sort), then each bucket's other
+        // ends sorted: a vertex has a handful of edges, so this is linear where one sort of
+        // all the edges took most of the test (the bunny's 208k edges).
+        let edge = |t: &[u32; 3], k: usize| {
+            let (a, b) = (canon[t[k] as usize], canon[t[(k + 1) % 3] as usize]);
+            (a.min(b) as usize, a.max(b))
+        };
+        let mut start = vec![0usize; self.positions.len() + 1];
+        for t in &self.triangles {
+            for k in 0..3 {
+                start[edge(t, k).0 + 1] += 1;
+            }
+        }
+        for v in 0..self.positions.len() {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut other = vec![0u32; 3 * self.triangles.len()];
+        for t in &self.triangles {
+            for k in 0..3 {
+                let (a, b) = edge(t, k);
+                other[fill[a]] = b;
+                fill[a] += 1;
+            }
+        }
+        start.windows(2).all(|w| {
+            let ends = &mut other[w[0]..w[1]];
+            ends.sort_unstable();
+            ends.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
+        })
     }
 
     /// The signed volume enclosed (divergence theorem, in f64): positive when a closed mesh
@@ -630,6 +648,56 @@ mod tests {
         assert!(!cut.is_closed());
         assert_eq!(cut.close_holes(), 2);
         assert!(cut.is_closed());
+    }
+
+    /// `is_closed` against a plain count of every edge by its ends' positions, on random
+    /// triangle soups over a few positions (some vertices copies of others, some triangles
+    /// repeated or degenerate), closed or not as chance has it.
+    #[test]
+    fn closedness_matches_a_count_of_edges_by_position() {
+        use std::collections::HashMap;
+        let mut seed = 7u32;
+        let mut next = |n: u32| {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) % n
+        };
+        let (mut closed, mut open) = (0, 0);
+        for _ in 0..400 {
+            let spots = 2 + next(5);
+            let positions: Vec<Vec3> = (0..2 + next(8))
+                .map(|_| Vec3::new(next(spots) as f32, 0.5, 0.0))
+                .collect();
+            let n = positions.len() as u32;
+            let mut triangles: Vec<[u32; 3]> = (0..1 + next(6))
+                .map(|_| [next(n), next(n), next(n)])
+                .collect();
+            if next(2) == 0 {
+                triangles.extend(triangles.clone()); // every edge twice: closed
+            }
+            // Not `Mesh::new`: its validation would refuse the degenerate triangles.
+            let mesh = Mesh {
+                positions: positions.clone(),
+                triangles: triangles.clone(),
+                normals: Vec::new(),
+                uvs: None,
+            };
+            let mut count: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+            for t in &triangles {
+                for k in 0..3 {
+                    let [a, b] = [t[k], t[(k + 1) % 3]]
+                        .map(|i| positions[i as usize].to_array().map(f32::to_bits));
+                    *count.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            let want = count.values().all(|c| c % 2 == 0);
+            assert_eq!(mesh.is_closed(), want, "{positions:?} {triangles:?}");
+            (closed, open) = if want {
+                (closed + 1, open)
+            } else {
+                (closed, open + 1)
+            };
+        }
+        assert!(closed > 100 && open > 100, "{closed} closed, {open} open");
     }
 
     #[test]

@@ -101,7 +101,7 @@ fn band_errors(field: &DistanceField, mesh: &Mesh) -> Vec<(f32, bool)> {
             (lo.max(0), hi.min(nz - 1))
         })
         .collect();
-    let bins = SlabBins::by_layers(nz as usize, SLAB_LAYERS, &layers);
+    let bins = SlabBins::by_layers::<{ SLAB_LAYERS as u32 }>(nz as usize, &layers);
     // Cells the splat leaves open are queried; the tree is built only if one is.
     let bvh = OnceLock::new();
     let query = |p: Vec3| {

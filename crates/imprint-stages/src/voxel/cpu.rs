@@ -167,38 +167,70 @@ impl SlabBins {
                 (lo, hi)
             })
             .collect();
-        Self::by_layers(spec.dims.z as usize, SLAB_LAYERS, &layers)
+        Self::by_layers::<{ SLAB_LAYERS as u32 }>(spec.dims.z as usize, &layers)
     }
 
-    /// Triangle `t` in every slab of `per_slab` of the `nz` z-layers that `layers[t]` (first,
+    /// Triangle `t` in every slab of `PER_SLAB` of the `nz` z-layers that `layers[t]` (first,
     /// last, within `0..nz`; first > last: none) reaches.
-    pub(crate) fn by_layers(nz: usize, per_slab: usize, layers: &[(i32, i32)]) -> Self {
-        let slabs = nz.div_ceil(per_slab);
-        let l = per_slab as i32;
+    ///
+    /// Chunks of triangles are sorted by slab side by side, then each slab's lists are joined
+    /// in chunk order: increasing index whatever the thread count (one pass over the bunny's
+    /// 69k triangles on one thread was a tenth of the voxeliser's samples). `PER_SLAB` is a
+    /// constant so that finding a layer's slab is a shift, not a division.
+    pub(crate) fn by_layers<const PER_SLAB: u32>(nz: usize, layers: &[(i32, i32)]) -> Self {
+        const CHUNK: usize = 8192;
+        let slabs = nz.div_ceil(PER_SLAB as usize);
         let range = |&(lo, hi): &(i32, i32)| {
             if lo > hi {
                 0..0
             } else {
-                (lo / l) as usize..(hi / l) as usize + 1
+                // Both within `0..nz`, so their u32 values are theirs.
+                (lo as u32 / PER_SLAB) as usize..(hi as u32 / PER_SLAB) as usize + 1
             }
         };
+        let chunks: Vec<SlabBins> = layers
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let mut start = vec![0usize; slabs + 1];
+                for r in chunk {
+                    for s in range(r) {
+                        start[s + 1] += 1;
+                    }
+                }
+                for s in 0..slabs {
+                    start[s + 1] += start[s];
+                }
+                let mut fill = start.clone();
+                let mut tris = vec![0u32; start[slabs]];
+                for (t, r) in chunk.iter().enumerate() {
+                    for s in range(r) {
+                        tris[fill[s]] = (c * CHUNK + t) as u32;
+                        fill[s] += 1;
+                    }
+                }
+                SlabBins { start, tris }
+            })
+            .collect();
         let mut start = vec![0usize; slabs + 1];
-        for r in layers {
-            for s in range(r) {
-                start[s + 1] += 1;
-            }
-        }
         for s in 0..slabs {
-            start[s + 1] += start[s];
+            start[s + 1] = start[s] + chunks.iter().map(|c| c.of(s).len()).sum::<usize>();
         }
-        let mut fill = start.clone();
         let mut tris = vec![0u32; start[slabs]];
-        for (t, r) in layers.iter().enumerate() {
-            for s in range(r) {
-                tris[fill[s]] = t as u32;
-                fill[s] += 1;
-            }
+        let mut rest = &mut tris[..];
+        let mut outs = Vec::with_capacity(slabs);
+        for s in 0..slabs {
+            let (out, after) = rest.split_at_mut(start[s + 1] - start[s]);
+            outs.push(out);
+            rest = after;
         }
+        outs.into_par_iter().enumerate().for_each(|(s, out)| {
+            let mut at = 0;
+            for part in chunks.iter().map(|c| c.of(s)) {
+                out[at..at + part.len()].copy_from_slice(part);
+                at += part.len();
+            }
+        });
         SlabBins { start, tris }
     }
 
@@ -231,8 +263,9 @@ fn propose_slab(
     );
     // (cell, triangle) pairs past the plane test, their closest points a batch at a time;
     // the proposals do not depend on the order.
-    let mut batch = Batch::<(u32, u32)>::default();
-    let mut propose = |(cell, ti): (u32, u32), q: Vec3, d2: f32| {
+    // Tagged with the cell's coordinates too: the box test's centre without three divisions.
+    let mut batch = Batch::<(u32, u32, IVec3)>::default();
+    let mut propose = |(cell, ti, at): (u32, u32, IVec3), q: Vec3, d2: f32| {
         // Outside the circumscribed sphere: no contact. A cell that already holds a smaller
         // key: nothing to change (the key is a minimum and the cell is marked). Inside the
         // inscribed sphere, or the closest point inside the box: contact (half the pairs in
@@ -247,7 +280,7 @@ fn propose_slab(
             return;
         }
         if d2 > 0.25 {
-            let centre = spec.coords(cell).as_vec3();
+            let centre = at.as_vec3();
             let in_box = (q - centre).abs().cmple(Vec3::splat(CELL_HALF)).all();
             let [a, b, c] = mesh.triangles[ti as usize].map(|i| verts[i as usize]);
             if !in_box && !triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c) {
@@ -269,12 +302,13 @@ fn propose_slab(
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
-                    let centre = Vec3::new(x as f32, y as f32, z as f32);
+                    let at = IVec3::new(x, y, z);
+                    let centre = at.as_vec3();
                     if n.dot(centre - a).abs() > reach {
                         continue;
                     }
                     let cell = x as usize + nx * y as usize + nxy * z as usize;
-                    if batch.push(centre, [a, b, c], (cell as u32, ti)) {
+                    if batch.push(centre, [a, b, c], (cell as u32, ti, at)) {
                         batch.run(&mut propose);
                     }
                 }
@@ -338,4 +372,37 @@ pub fn voxelize_cpu(mesh: &Mesh, spec: &GridSpec, variant: BoundaryVariant) -> R
 /// Cell coordinates of a boundary's surface cell.
 pub fn cell_coords(spec: &GridSpec, cell: u32) -> UVec3 {
     spec.coords(cell as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SlabBins;
+
+    /// The bins against a plain scan: every slab lists exactly the triangles whose layers
+    /// reach it, in increasing index, across several chunks and with empty ranges.
+    #[test]
+    fn slab_bins_list_each_slabs_triangles_in_order() {
+        const PER_SLAB: usize = 4;
+        let nz = 37;
+        let mut seed = 12345u32;
+        let layers: Vec<(i32, i32)> = (0..20_000)
+            .map(|_| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let lo = (seed >> 8) as i32 % nz as i32;
+                let len = (seed >> 20) as i32 % 9 - 2; // some first > last: reaches none
+                (lo, (lo + len).min(nz as i32 - 1))
+            })
+            .collect();
+        let bins = SlabBins::by_layers::<{ PER_SLAB as u32 }>(nz, &layers);
+        for s in 0..nz.div_ceil(PER_SLAB) {
+            let (first, last) = ((s * PER_SLAB) as i32, ((s + 1) * PER_SLAB) as i32 - 1);
+            let want: Vec<u32> = (0..layers.len() as u32)
+                .filter(|&t| {
+                    let (lo, hi) = layers[t as usize];
+                    lo <= hi && lo <= last && hi >= first
+                })
+                .collect();
+            assert_eq!(bins.of(s), want.as_slice(), "slab {s}");
+        }
+    }
 }

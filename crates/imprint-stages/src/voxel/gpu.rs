@@ -153,7 +153,7 @@ struct VoxelParams {
 }
 
 /// The discrete boundary of `mesh` on `spec`, computed on the GPU and left there, with its
-/// inside cells when the mesh is closed ([`Mesh::is_closed`], which sorts the edges: a caller
+/// inside cells when the mesh is closed ([`Mesh::is_closed`], which visits every edge: a caller
 /// voxelising the same mesh every frame keeps a [`super::solid::ClosedCache`] and calls
 /// [`voxelize_gpu_timed`]). The work is submitted, not waited for: reading it back (or the
 /// next stage's submit) orders it.

@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 const TRIANGLES_PER_TASK: usize = 2048;
 
-/// Remembers whether a mesh is closed ([`Mesh::is_closed`] sorts every edge): a body that
+/// Remembers whether a mesh is closed ([`Mesh::is_closed`] visits every edge): a body that
 /// deforms keeps its triangles, so it is checked again only when they change.
 #[derive(Default)]
 pub struct ClosedCache {
