@@ -5,6 +5,7 @@
 //! - [`grid`]: the uniform cell grid ([`GridSpec`]) and dense 3D arrays ([`Grid3`]);
 //! - [`geom`]: bounding boxes, closest point on a triangle, triangle/box overlap;
 //! - [`closest`]: closest points on triangles 32 pairs at a time, the scalar function's bits;
+//! - [`buckets`]: items grouped by a small integer key in the order they came (a counting sort);
 //! - [`bvh`]: an exact closest-point query on a mesh, the reference every error is measured against;
 //! - [`camera`], [`raster`]: cameras and the CPU depth rasteriser (`DepthMap`), the reference for
 //!   the depth-buffer methods (draping, snow, ground contact);
@@ -14,6 +15,7 @@
 //! - [`io`]: atomic file writing (nothing half-written under a final name);
 //! - [`error`]: the error type and what each kind means as an exit code.
 
+pub mod buckets;
 pub mod bvh;
 pub mod camera;
 pub mod closest;

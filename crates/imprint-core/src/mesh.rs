@@ -35,33 +35,21 @@ impl Mesh {
                 canon[i as usize] = run[0];
             }
         }
-        // The edges bucketed by their smaller end (a counting sort), then each bucket's other
+        // The edges grouped by their smaller end (a counting sort), then each group's other
         // ends sorted: a vertex has a handful of edges, so this is linear where one sort of
         // all the edges took most of the test (the bunny's 208k edges).
-        let edge = |t: &[u32; 3], k: usize| {
-            let (a, b) = (canon[t[k] as usize], canon[t[(k + 1) % 3] as usize]);
-            (a.min(b) as usize, a.max(b))
+        let canon = &canon;
+        let edges = || {
+            self.triangles.iter().flat_map(|t| {
+                (0..3).map(move |k| {
+                    let (a, b) = (canon[t[k] as usize], canon[t[(k + 1) % 3] as usize]);
+                    (a.min(b) as usize, a.max(b))
+                })
+            })
         };
-        let mut start = vec![0usize; self.positions.len() + 1];
-        for t in &self.triangles {
-            for k in 0..3 {
-                start[edge(t, k).0 + 1] += 1;
-            }
-        }
-        for v in 0..self.positions.len() {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut other = vec![0u32; 3 * self.triangles.len()];
-        for t in &self.triangles {
-            for k in 0..3 {
-                let (a, b) = edge(t, k);
-                other[fill[a]] = b;
-                fill[a] += 1;
-            }
-        }
-        start.windows(2).all(|w| {
-            let ends = &mut other[w[0]..w[1]];
+        let mut by_end = crate::buckets::Buckets::build(self.positions.len(), edges);
+        (0..self.positions.len()).all(|v| {
+            let ends = by_end.of_mut(v);
             ends.sort_unstable();
             ends.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
         })

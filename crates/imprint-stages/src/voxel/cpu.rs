@@ -16,6 +16,7 @@
 
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
+use imprint_core::buckets::Buckets;
 use imprint_core::closest::Batch;
 use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
@@ -148,10 +149,7 @@ impl Voxelizer {
 }
 
 /// The triangles of each slab, in increasing index (a counting sort by slab).
-pub(crate) struct SlabBins {
-    start: Vec<usize>,
-    tris: Vec<u32>,
-}
+pub(crate) struct SlabBins(Buckets);
 
 impl SlabBins {
     /// The voxeliser's bins: a triangle reaches the z-layers of its candidate cells.
@@ -173,9 +171,9 @@ impl SlabBins {
     /// Triangle `t` in every slab of `PER_SLAB` of the `nz` z-layers that `layers[t]` (first,
     /// last, within `0..nz`; first > last: none) reaches.
     ///
-    /// Chunks of triangles are sorted by slab side by side, then each slab's lists are joined
-    /// in chunk order: increasing index whatever the thread count (one pass over the bunny's
-    /// 69k triangles on one thread was a tenth of the voxeliser's samples). `PER_SLAB` is a
+    /// Chunks of triangles are binned side by side, then each slab's lists are joined in chunk
+    /// order: increasing index whatever the thread count (one pass over the bunny's 69k
+    /// triangles on one thread was a tenth of the voxeliser's samples). `PER_SLAB` is a
     /// constant so that finding a layer's slab is a shift, not a division.
     pub(crate) fn by_layers<const PER_SLAB: u32>(nz: usize, layers: &[(i32, i32)]) -> Self {
         const CHUNK: usize = 8192;
@@ -188,55 +186,25 @@ impl SlabBins {
                 (lo as u32 / PER_SLAB) as usize..(hi as u32 / PER_SLAB) as usize + 1
             }
         };
-        let chunks: Vec<SlabBins> = layers
+        let chunks: Vec<Buckets> = layers
             .par_chunks(CHUNK)
             .enumerate()
             .map(|(c, chunk)| {
-                let mut start = vec![0usize; slabs + 1];
-                for r in chunk {
-                    for s in range(r) {
-                        start[s + 1] += 1;
-                    }
-                }
-                for s in 0..slabs {
-                    start[s + 1] += start[s];
-                }
-                let mut fill = start.clone();
-                let mut tris = vec![0u32; start[slabs]];
-                for (t, r) in chunk.iter().enumerate() {
-                    for s in range(r) {
-                        tris[fill[s]] = (c * CHUNK + t) as u32;
-                        fill[s] += 1;
-                    }
-                }
-                SlabBins { start, tris }
+                let pairs = || {
+                    chunk
+                        .iter()
+                        .enumerate()
+                        .flat_map(move |(t, r)| range(r).map(move |s| (s, (c * CHUNK + t) as u32)))
+                };
+                Buckets::build(slabs, pairs)
             })
             .collect();
-        let mut start = vec![0usize; slabs + 1];
-        for s in 0..slabs {
-            start[s + 1] = start[s] + chunks.iter().map(|c| c.of(s).len()).sum::<usize>();
-        }
-        let mut tris = vec![0u32; start[slabs]];
-        let mut rest = &mut tris[..];
-        let mut outs = Vec::with_capacity(slabs);
-        for s in 0..slabs {
-            let (out, after) = rest.split_at_mut(start[s + 1] - start[s]);
-            outs.push(out);
-            rest = after;
-        }
-        outs.into_par_iter().enumerate().for_each(|(s, out)| {
-            let mut at = 0;
-            for part in chunks.iter().map(|c| c.of(s)) {
-                out[at..at + part.len()].copy_from_slice(part);
-                at += part.len();
-            }
-        });
-        SlabBins { start, tris }
+        SlabBins(Buckets::join(slabs, &chunks))
     }
 
     /// The triangles of slab `slab`, in increasing index.
     pub(crate) fn of(&self, slab: usize) -> &[u32] {
-        &self.tris[self.start[slab]..self.start[slab + 1]]
+        self.0.of(slab)
     }
 }
 
@@ -263,9 +231,9 @@ fn propose_slab(
     );
     // (cell, triangle) pairs past the plane test, their closest points a batch at a time;
     // the proposals do not depend on the order.
-    // Tagged with the cell's coordinates too: the box test's centre without three divisions.
-    let mut batch = Batch::<(u32, u32, IVec3)>::default();
-    let mut propose = |(cell, ti, at): (u32, u32, IVec3), q: Vec3, d2: f32| {
+    // Tagged with the cell's coordinates: the box test's centre without three divisions.
+    let mut batch = Batch::<(IVec3, u32)>::default();
+    let mut propose = |(at, ti): (IVec3, u32), q: Vec3, d2: f32| {
         // Outside the circumscribed sphere: no contact. A cell that already holds a smaller
         // key: nothing to change (the key is a minimum and the cell is marked). Inside the
         // inscribed sphere, or the closest point inside the box: contact (half the pairs in
@@ -273,9 +241,9 @@ fn propose_slab(
         if d2 > 3.0 * CELL_HALF * CELL_HALF {
             return;
         }
-        let cell = cell as usize;
         let key = ((d2.to_bits() as u64) << 32) | ti as u64;
-        let local = cell - base;
+        let [x, y, z] = at.to_array().map(|c| c as usize);
+        let local = x + nx * y + nxy * z - base;
         if key >= best[local] {
             return;
         }
@@ -307,8 +275,7 @@ fn propose_slab(
                     if n.dot(centre - a).abs() > reach {
                         continue;
                     }
-                    let cell = x as usize + nx * y as usize + nxy * z as usize;
-                    if batch.push(centre, [a, b, c], (cell as u32, ti, at)) {
+                    if batch.push(centre, [a, b, c], (at, ti)) {
                         batch.run(&mut propose);
                     }
                 }
