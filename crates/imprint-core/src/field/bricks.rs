@@ -14,11 +14,12 @@ use std::ops::Range;
 /// Base cells per block side, and its log2.
 const BRICK_LOG2: u32 = 2;
 
-/// Per block of 4³ base cells, a bit set when a read based there may touch a cell that is not
-/// plainly far (see the module docs).
+/// Per block of 4³ base cells, whether a read based there may touch a cell that is not
+/// plainly far (see the module docs). A byte per block, not a bit: the cloth looks up eight
+/// blocks per read, and a byte is one load where a bit added a shift, a mask and a division.
 #[derive(Clone, Debug, Default)]
 pub struct FarBricks {
-    bits: Vec<u64>,
+    near: Vec<bool>,
     /// Blocks along x, and in an xy layer.
     bx: usize,
     bxy: usize,
@@ -32,7 +33,7 @@ impl FarBricks {
             .to_array()
             .map(|d| (d as usize).div_ceil(1 << BRICK_LOG2));
         let mut b = FarBricks {
-            bits: vec![0; (n[0] * n[1] * n[2]).div_ceil(64)],
+            near: vec![false; n[0] * n[1] * n[2]],
             bx: n[0],
             bxy: n[0] * n[1],
         };
@@ -48,8 +49,7 @@ impl FarBricks {
             for z in bz[0]..=bz[1] {
                 for y in by[0]..=by[1] {
                     for x in bx0..=bx1 {
-                        let i = x + b.bx * y + b.bxy * z;
-                        b.bits[i / 64] |= 1 << (i % 64);
+                        b.near[x + b.bx * y + b.bxy * z] = true;
                     }
                 }
             }
@@ -60,8 +60,22 @@ impl FarBricks {
     /// Whether every cell a trilinear read based at cell `(x, y, z)` touches is plainly far.
     #[inline(always)]
     pub fn all_far(&self, [x, y, z]: [usize; 3]) -> bool {
-        let i = (x >> BRICK_LOG2) + self.bx * (y >> BRICK_LOG2) + self.bxy * (z >> BRICK_LOG2);
-        self.bits[i / 64] >> (i % 64) & 1 == 0
+        self.far_block(self.block([x, y, z].map(|c| c as u32)))
+    }
+
+    /// The block of base cell `(x, y, z)`, in the grid: in 32-bit arithmetic, which a loop
+    /// over lanes takes eight at a time (a grid indexable by `u32`, as the field's cells are).
+    #[inline(always)]
+    pub fn block(&self, [x, y, z]: [u32; 3]) -> u32 {
+        let (bx, bxy) = (self.bx as u32, self.bxy as u32);
+        (x >> BRICK_LOG2) + bx * (y >> BRICK_LOG2) + bxy * (z >> BRICK_LOG2)
+    }
+
+    /// Whether every cell a read based in block `b` ([`FarBricks::block`]) touches is plainly
+    /// far.
+    #[inline(always)]
+    pub fn far_block(&self, b: u32) -> bool {
+        !self.near[b as usize]
     }
 }
 

@@ -114,7 +114,7 @@ fn touch_lanes(
     for m in 0..LANES {
         // `respond`: the memory, then a push to ε along the outward direction normalised
         // (`try_normalize`: none unless 1 / length is a positive finite number), friction.
-        let (o, d) = (outward[m], distance[m]);
+        let (o, d) = (each(|k| outward[k][m]), distance[m]);
         let valid = t.live[m] & some[m];
         let rcp: f32 = 1.0 / length(o);
         let hit = valid & (d < eps) & rcp.is_finite() & (rcp > 0.0);
@@ -145,7 +145,7 @@ fn touch_lanes(
 struct SignedLanes {
     some: [bool; LANES],
     distance: Lanes,
-    outward: [[f32; 3]; LANES],
+    outward: [Lanes; 3],
     miss: [bool; LANES],
 }
 
@@ -177,14 +177,16 @@ fn signed_lanes(
     let mut out = SignedLanes {
         some: [false; LANES],
         distance: [0.0; LANES],
-        outward: [[0.0; 3]; LANES],
+        outward: [[0.0; LANES]; 3],
         miss: [false; LANES],
     };
     match start {
         None => {
             for m in 0..LANES {
-                (out.some[m], out.distance[m], out.outward[m]) =
+                let o;
+                (out.some[m], out.distance[m], o) =
                     classify(db[m], lane(&vb, m), side(m), reach(m));
+                (0..3).for_each(|k| out.outward[k][m] = o[k]);
             }
         }
         Some((start, s)) => {
@@ -197,7 +199,8 @@ fn signed_lanes(
                 let moved = [own + motion[0][m], own + motion[1][m]];
                 let ((p, d, o), band_miss) =
                     blend(a, ia[m], b, ib[m], s, side(m), (own, moved), eps);
-                (out.some[m], out.distance[m], out.outward[m], out.miss[m]) = (p, d, o, band_miss);
+                (out.some[m], out.distance[m], out.miss[m]) = (p, d, band_miss);
+                (0..3).for_each(|k| out.outward[k][m] = o[k]);
             }
         }
     }

@@ -135,6 +135,9 @@ struct Substep<'a> {
     at: &'a Lanes,
     prev: &'a Lanes,
     inv_mass: &'a [f32],
+    /// Per particle, whether it moves freely (not pinned), padded with `false` to whole
+    /// blocks: a block's lanes are then one load.
+    free: &'a [bool],
     /// The particles (the rest of the last block is padding).
     n: usize,
     hinges: &'a Hinges,
@@ -184,6 +187,8 @@ pub struct ClothSim {
     lanes_next: Lanes,
     #[serde(skip)]
     inv_mass: Vec<f32>,
+    #[serde(skip)]
+    free: Vec<bool>,
     hinges: Hinges,
     faces: Faces,
     pinned: Vec<u32>,
@@ -303,6 +308,7 @@ impl ClothSim {
             lanes_prev: Lanes::default(),
             lanes_next: Lanes::default(),
             inv_mass: Vec::new(),
+            free: Vec::new(),
             links,
             hinges,
             faces,
@@ -596,6 +602,10 @@ impl ClothSim {
         self.corners.iter_mut().flatten().for_each(Corners::forget);
         self.inv_mass.clear();
         self.inv_mass.resize(n.div_ceil(LANES) * LANES, 0.0);
+        self.free.clear();
+        self.free
+            .extend(self.pin_slot.iter().map(|&s| s == u32::MAX));
+        self.free.resize(n.div_ceil(LANES) * LANES, false);
         for (i, (p, q)) in self.state.pos.iter().zip(&self.state.prev).enumerate() {
             (self.lanes.x[i], self.lanes.y[i], self.lanes.z[i]) = (p.x, p.y, p.z);
             (
@@ -681,6 +691,7 @@ impl ClothSim {
             at: &self.lanes,
             prev: &self.lanes_prev,
             inv_mass: &self.inv_mass,
+            free: &self.free,
             n: self.shape.len(),
             hinges: &self.hinges,
             faces: &self.faces,
@@ -1101,12 +1112,8 @@ fn step_block(
     st: &mut SubstepStats,
 ) -> [Lane; 3] {
     let count = ctx.n.saturating_sub(first).min(LANES);
-    // Lanes that move freely: not pinned, not padding. (Loops, not `array::from_fn`, whose
-    // closures are not inlined into the AVX2 build.)
-    let mut live = [false; LANES];
-    for (m, live) in live.iter_mut().enumerate().take(count) {
-        *live = ctx.pin_slot[first + m] == u32::MAX;
-    }
+    // Lanes that move freely: not pinned, not padding.
+    let live: [bool; LANES] = ctx.free[first..first + LANES].try_into().expect("a block");
     let block = |a: &[f32]| -> Lane { a[first..first + LANES].try_into().expect("a block") };
     let x = [block(&ctx.at.x), block(&ctx.at.y), block(&ctx.at.z)];
     let xp = [block(&ctx.prev.x), block(&ctx.prev.y), block(&ctx.prev.z)];
@@ -1141,9 +1148,12 @@ fn step_block(
     let mut xn = [[0.0f32; LANES]; 3];
     for a in 0..3 {
         for m in 0..LANES {
-            let v = x[a][m] + ctx.damping * moved[a][m] + (f[a][m] * w[m] + g[a]) * dt2;
-            xn[a][m] = if m < count { v } else { 0.0 };
+            xn[a][m] = x[a][m] + ctx.damping * moved[a][m] + (f[a][m] * w[m] + g[a]) * dt2;
         }
+    }
+    // Padding lanes stay at zero (the last block only: a branch per block, not per lane).
+    if count < LANES {
+        xn.iter_mut().for_each(|xn| xn[count..].fill(0.0));
     }
     for m in (0..count).filter(|&m| !live[m]) {
         let slot = ctx.pin_slot[first + m] as usize;
@@ -1245,6 +1255,9 @@ fn block_stats(
     live: &[bool; LANES],
     st: &mut SubstepStats,
 ) {
+    // The squares of the live lanes, zero for the others: a sum from +0 never reaches −0, so
+    // adding +0 leaves it as it is, and the largest squared change is never below 0. So the
+    // lanes go without a branch each.
     let mut step2 = [0.0f32; LANES];
     let mut accel2 = [0.0f32; LANES];
     let mut finite = [true; LANES];
@@ -1255,16 +1268,33 @@ fn block_stats(
             x[2][m] - from[2][m],
         ];
         let d = [s[0] - moved[0][m], s[1] - moved[1][m], s[2] - moved[2][m]];
-        step2[m] = s[0] * s[0] + s[1] * s[1] + s[2] * s[2];
-        accel2[m] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let (s2, a2) = (
+            s[0] * s[0] + s[1] * s[1] + s[2] * s[2],
+            d[0] * d[0] + d[1] * d[1] + d[2] * d[2],
+        );
+        step2[m] = if live[m] { s2 } else { 0.0 };
+        accel2[m] = if live[m] { a2 } else { 0.0 };
         finite[m] = x[0][m].is_finite() & x[1][m].is_finite() & x[2][m].is_finite();
     }
-    for m in (0..LANES).filter(|&m| live[m]) {
-        if !finite[m] {
-            st.nonfinite = st.nonfinite.min((first + m) as u32);
+    // The kinetic energy's sum in the lanes' order (its bits depend on it); the largest in
+    // halves (`max` drops NaNs, so any order gives the same).
+    for s in step2 {
+        st.kinetic += s as f64;
+    }
+    let mut half = LANES / 2;
+    while half > 0 {
+        for m in 0..half {
+            accel2[m] = accel2[m].max(accel2[m + half]);
         }
-        st.kinetic += step2[m] as f64;
-        st.max_accel = st.max_accel.max(accel2[m]);
+        half /= 2;
+    }
+    st.max_accel = st.max_accel.max(accel2[0]);
+    let mut bad = 0u32;
+    for m in 0..LANES {
+        bad |= ((live[m] & !finite[m]) as u32) << m;
+    }
+    if bad != 0 {
+        st.nonfinite = st.nonfinite.min(first as u32 + bad.trailing_zeros());
     }
 }
 
@@ -1304,7 +1334,9 @@ fn touch_block(
     };
     let corners = &mut memory.corners[k0 / LANES * nf + c];
     let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction, corners);
-    // A lane indexes the results, the positions and the chunk's memories alike.
+    // The positions are the old where there was no hit.
+    *x = r.x;
+    // A lane indexes the results and the chunk's memories alike.
     #[allow(clippy::needless_range_loop)]
     for m in 0..LANES {
         if r.remember[m] {
@@ -1312,7 +1344,6 @@ fn touch_block(
                 Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
         }
         if r.hit[m] {
-            (0..3).for_each(|a| x[a][m] = r.x[a][m]);
             let hit = Hit {
                 depth: r.depth[m],
                 inside: r.inside[m],

@@ -31,6 +31,24 @@ pub fn lane_vec(v: &[Lane; 3], m: usize) -> Vec3 {
     Vec3::new(v[0][m], v[1][m], v[2][m])
 }
 
+/// A lane mask's value for `b`: all ones or zero. Lane loops over masks vectorise where
+/// loops over `bool`s (bytes) do not.
+#[inline(always)]
+pub fn mask(b: bool) -> u32 {
+    if b { u32::MAX } else { 0 }
+}
+
+/// One bit per lane of a lane mask (bit `m` set where lane `m`'s mask is all ones), from
+/// the masks' top bits: the pattern the compiler turns into one `movmskps`.
+#[inline(always)]
+pub fn lane_bits(mask: &[u32; LANES]) -> u32 {
+    let mut bits = 0;
+    for (m, &k) in mask.iter().enumerate() {
+        bits |= (k >> 31) << m;
+    }
+    bits
+}
+
 /// Lengths below this count as zero when normalising a spring (as in `cpu`).
 const TINY: f32 = 1e-20;
 
@@ -236,14 +254,30 @@ impl Blocks {
         let mut acc = [[zero; 3]; 4];
         let mut over = zero;
         let slots = &self.slots[self.offsets[b] as usize..self.offsets[b + 1] as usize];
+        // Every slot's other ends are particles, and a run's eight lie within the blocks
+        // (`Blocks::build`), which the positions cover: checked once here, so the loads
+        // below need no check of their own.
+        let len = at.x.len().min(at.y.len()).min(at.z.len());
+        assert!(
+            len >= self
+                .particles
+                .max(self.offsets.len().saturating_sub(1) * LANES)
+        );
+        let axes = [at.x.as_ptr(), at.y.as_ptr(), at.z.as_ptr()];
         for quad in slots.chunks_exact(4) {
             for (l, slot) in quad.iter().enumerate() {
-                let o = if slot.run != u32::MAX {
-                    let o = slot.run as usize;
-                    [load8(&at.x, o), load8(&at.y, o), load8(&at.z, o)]
-                } else {
-                    let v = self.other_ends(slot, at);
-                    [load8(&v[0], 0), load8(&v[1], 0), load8(&v[2], 0)]
+                // SAFETY: in bounds (the assertion above), the run's eight as the gathered.
+                let o = unsafe {
+                    if slot.run != u32::MAX {
+                        let o = slot.run as usize;
+                        axes.map(|a| _mm256_loadu_ps(a.add(o)))
+                    } else {
+                        // One gather per axis, where eight loads and stores into lanes and
+                        // a load back cost 50 instructions.
+                        let ends = &self.others[slot.other as usize];
+                        let i = _mm256_loadu_si256(ends.as_ptr().cast());
+                        axes.map(|a| _mm256_i32gather_ps::<4>(a, i))
+                    }
                 };
                 let consts = &self.constants[slot.constants as usize];
                 // (No `array::map` here: its closures are not inlined into AVX2 code.)

@@ -10,7 +10,7 @@
 //! is computed once though the cloth reads it in two frames (as the end, then the start).
 //! Reads in the grid's outermost half cell or outside it take the field's own code.
 
-use super::lanes::LANES;
+use super::lanes::{LANES, lane_bits, mask};
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
 use imprint_core::field::{FarBricks, vector_distance};
 use imprint_core::{DistanceField, FieldSample, Sampling};
@@ -69,8 +69,8 @@ pub struct CellLanes {
     i: [[i32; LANES]; 3],
     /// The fraction within the cell.
     t: [[f32; LANES]; 3],
-    /// Whether all eight cells of a read are in the grid.
-    inner: [bool; LANES],
+    /// All ones where all eight cells of a read are in the grid, else zero (a lane mask).
+    inner: [u32; LANES],
 }
 
 /// A sample and, for a signed field, the blend of the cells' signed distances
@@ -117,12 +117,19 @@ impl<'a> FieldView<'a> {
         c: &CellLanes,
         corners: &mut Corners,
     ) -> ([f32; LANES], [[f32; LANES]; 3], [bool; LANES]) {
-        let (t, inner) = (&c.t, c.inner);
-        let mut load = 0u32;
-        for m in 0..LANES {
-            let held = (0..3).fold(true, |h, a| h & (corners.base[a][m] == c.i[a][m]));
-            load |= ((inner[m] & !held) as u32) << m;
+        let t = &c.t;
+        // Lane masks (all ones or zero), which vectorise where bools do not.
+        let mut held = [u32::MAX; LANES];
+        for a in 0..3 {
+            for m in 0..LANES {
+                held[m] &= mask(corners.base[a][m] == c.i[a][m]);
+            }
         }
+        let mut need = [0u32; LANES];
+        for m in 0..LANES {
+            need[m] = c.inner[m] & !held[m];
+        }
+        let mut load = lane_bits(&need);
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
         let far = -self.field.far_value();
         while load != 0 {
@@ -149,7 +156,7 @@ impl<'a> FieldView<'a> {
         }
         // The field's weights in its order, and the blends, corner after corner.
         let (mut v, mut dist) = ([[0.0f32; LANES]; 3], [0.0f32; LANES]);
-        let mut far = [false; LANES];
+        let mut far = [0u32; LANES];
         let [cx, cy, cz, cw] = &corners.cells;
         for k in 0..8 {
             for m in 0..LANES {
@@ -165,7 +172,7 @@ impl<'a> FieldView<'a> {
                 v[1][m] += w * cy[k][m];
                 v[2][m] += w * cz[k][m];
                 dist[m] += w * cw[k][m].abs();
-                far[m] |= cw[k][m] < 0.0;
+                far[m] |= mask(cw[k][m] < 0.0);
             }
         }
         // In the band: the vector's length or the bound (`finish`); at its edge: the blend of
@@ -175,10 +182,13 @@ impl<'a> FieldView<'a> {
             let len = (v[0][m] * v[0][m] + v[1][m] * v[1][m] + v[2][m] * v[2][m]).sqrt();
             let t = Vec3::new(t[0][m], t[1][m], t[2][m]);
             let inside = vector_distance(len, dist[m], cell, t);
-            dist[m] = if far[m] { dist[m] } else { inside };
+            dist[m] = if far[m] != 0 { dist[m] } else { inside };
         }
-        let mut in_band = far.map(|far| !far);
-        for m in (0..LANES).filter(|&m| !inner[m]) {
+        let mut in_band = [false; LANES];
+        for m in 0..LANES {
+            in_band[m] = far[m] == 0;
+        }
+        for m in (0..LANES).filter(|&m| c.inner[m] == 0) {
             let f = self.sample(Vec3::new(p[0][m], p[1][m], p[2][m]));
             (dist[m], in_band[m]) = (f.distance, f.in_band);
             for (a, v) in v.iter_mut().enumerate() {
@@ -193,19 +203,30 @@ impl<'a> FieldView<'a> {
     /// read has no vector and is not in the band, so no contact can come of it; this costs
     /// a few operations per lane, where [`FieldView::sample_lanes`] loads eight cells.
     #[inline(always)]
+    // A lane indexes the cells and the masks alike.
+    #[allow(clippy::needless_range_loop)]
     pub fn lanes_far(&self, c: &CellLanes) -> bool {
         let dims = self.dims.to_array().map(|d| d as f32);
-        let mut all = true;
-        for m in 0..LANES {
-            // Off the grid by a cell or more: `read` gives the far sample.
-            let off = (0..3).fold(false, |o, a| {
-                o | (c.b[a][m] < -1.0) | (c.b[a][m] >= dims[a])
-            });
-            // `i` is clamped to the grid, so the brick lookup is in bounds for every lane.
-            let base = [0, 1, 2].map(|a| c.i[a][m] as usize);
-            all &= off | (c.inner[m] & self.far_bricks.all_far(base));
+        // Lane masks: off the grid by a cell or more (`read` gives the far sample), and the
+        // brick of each lane's cell (`i` is clamped to the grid, so in bounds for every lane).
+        let (mut off, mut block) = ([0u32; LANES], [0u32; LANES]);
+        for a in 0..3 {
+            for m in 0..LANES {
+                let out = (c.b[a][m] < -1.0) | (c.b[a][m] >= dims[a]);
+                off[m] |= mask(out);
+            }
         }
-        all
+        for m in 0..LANES {
+            block[m] = self.far_bricks.block([0, 1, 2].map(|a| c.i[a][m] as u32));
+        }
+        let mut far = [0u32; LANES];
+        for m in 0..LANES {
+            far[m] = mask(self.far_bricks.far_block(block[m]));
+        }
+        for m in 0..LANES {
+            far[m] = off[m] | (c.inner[m] & far[m]);
+        }
+        lane_bits(&far) == (1 << LANES) - 1
     }
 
     /// The lanes' cells (`p[axis][lane]`): their coordinates' floor (exact below 2^24, as
@@ -221,7 +242,7 @@ impl<'a> FieldView<'a> {
             b: [[0.0; LANES]; 3],
             i: [[0; LANES]; 3],
             t: [[0.0; LANES]; 3],
-            inner: [true; LANES],
+            inner: [u32::MAX; LANES],
         };
         for a in 0..3 {
             for m in 0..LANES {
@@ -229,7 +250,8 @@ impl<'a> FieldView<'a> {
                 let b = x.floor();
                 c.b[a][m] = b;
                 c.t[a][m] = x - b;
-                c.inner[m] &= (b >= 0.0) & (b + 1.0 < dims[a]);
+                let inside = (b >= 0.0) & (b + 1.0 < dims[a]);
+                c.inner[m] &= mask(inside);
                 // SAFETY: clamped to [0, dims − 1] (NaN to 0 by `max`), which an i32 holds:
                 // the plain conversion, which saturates, is one scalar call per lane.
                 c.i[a][m] = unsafe { b.max(0.0).min(dims[a] - 1.0).to_int_unchecked::<i32>() };
