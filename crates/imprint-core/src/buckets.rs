@@ -1,5 +1,6 @@
 //! Items grouped by a small integer key, each group in the order the items came (a counting
-//! sort): the voxeliser's and the error metric's triangles by slab, a mesh's edges by vertex.
+//! sort): the voxeliser's and the error metric's triangles by slab, a mesh's edges by vertex,
+//! the ground's cells by contour level.
 //! Linear in the items, where a comparison sort is n log n, and stable, so a group of
 //! increasing indices stays increasing.
 

@@ -12,6 +12,7 @@
 //! `d = min(d, neighbours + 1)` iterated in ping-pong, which reaches the same integers.
 
 use super::contact::Window;
+use imprint_core::buckets::Buckets;
 use serde::{Deserialize, Serialize};
 
 /// Level of a cell the map does not label.
@@ -81,53 +82,33 @@ pub fn neighbours(j: usize, w: usize, h: usize) -> [Option<usize>; 4] {
     ]
 }
 
-/// Cells grouped by level, each group in index order (a counting sort): what lets the
+/// Cells grouped by level, each group in index order ([`Buckets`]): what lets the
 /// displacement and the slump go level by level without scanning the window per level.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Levels {
     lo: u32,
-    start: Vec<u32>,
-    cells: Vec<u32>,
+    cells: Buckets,
 }
 
 impl Levels {
     /// The cells whose level is in `lo..=hi`.
     pub fn build(levels: &[u32], lo: u32, hi: u32) -> Self {
-        if hi < lo {
-            return Levels {
-                lo,
-                start: vec![0],
-                cells: Vec::new(),
-            };
-        }
-        let n = (hi - lo) as usize + 1;
-        let mut start = vec![0u32; n + 1];
-        for &l in levels {
-            if (lo..=hi).contains(&l) {
-                start[(l - lo) as usize + 1] += 1;
-            }
-        }
-        for i in 0..n {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut cells = vec![0u32; start[n] as usize];
-        for (j, &l) in levels.iter().enumerate() {
-            if (lo..=hi).contains(&l) {
-                let s = &mut fill[(l - lo) as usize];
-                cells[*s as usize] = j as u32;
-                *s += 1;
-            }
-        }
-        Levels { lo, start, cells }
+        let groups = if hi < lo { 0 } else { (hi - lo) as usize + 1 };
+        let cells = Buckets::build(groups, || {
+            let range = lo..=hi;
+            levels
+                .iter()
+                .enumerate()
+                .filter(move |&(_, l)| range.contains(l))
+                .map(move |(j, &l)| ((l - lo) as usize, j as u32))
+        });
+        Levels { lo, cells }
     }
 
     /// The cells of level `l` (empty outside the built range).
     pub fn level(&self, l: u32) -> &[u32] {
         match l.checked_sub(self.lo) {
-            Some(i) if (i as usize) + 1 < self.start.len() => {
-                &self.cells[self.start[i as usize] as usize..self.start[i as usize + 1] as usize]
-            }
+            Some(i) if (i as usize) < self.cells.groups() => self.cells.of(i as usize),
             _ => &[],
         }
     }
