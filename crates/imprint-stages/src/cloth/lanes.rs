@@ -39,7 +39,7 @@ pub fn mask(b: bool) -> u32 {
 }
 
 /// One bit per lane of a lane mask (bit `m` set where lane `m`'s mask is all ones), from
-/// the masks' top bits: the pattern the compiler turns into one `movmskps`.
+/// the masks' top bits (in the AVX2 build: a shift per lane and an OR across them, no branch).
 #[inline(always)]
 pub fn lane_bits(mask: &[u32; LANES]) -> u32 {
     let mut bits = 0;
@@ -272,8 +272,8 @@ impl Blocks {
                         let o = slot.run as usize;
                         axes.map(|a| _mm256_loadu_ps(a.add(o)))
                     } else {
-                        // One gather per axis, where eight loads and stores into lanes and
-                        // a load back cost 50 instructions.
+                        // One gather per axis: eight loads and stores into lanes and a load
+                        // back were the springs' costliest line (at 64², the edges).
                         let ends = &self.others[slot.other as usize];
                         let i = _mm256_loadu_si256(ends.as_ptr().cast());
                         axes.map(|a| _mm256_i32gather_ps::<4>(a, i))
