@@ -353,7 +353,8 @@ fn a_field_built_in_parts_is_the_field_built_at_once() {
 /// The per-cell vectors the cloth samples are the scalar closest-point vectors bit for bit,
 /// and a field computing them into the buffer a recycled field gave back (only its band cells
 /// written) has the cells of one computed afresh: the body moved, the variant changed, the
-/// band changed (a buffer of another far value is not used).
+/// band changed (a buffer of another far value is not used). So are its distances and
+/// nearest points, built into the recycled field's buffers (cleaned on its spans only).
 #[test]
 fn cells_in_a_recycled_buffer_are_the_cells_computed_afresh() {
     let m = mesh("suzanne");
@@ -384,6 +385,12 @@ fn cells_in_a_recycled_buffer_are_the_cells_computed_afresh() {
         } else {
             builder.build(&b, band).unwrap()
         };
+        // Built into the buffers of the field before it (cleaned only on that field's
+        // spans), it is the field built afresh.
+        let fresh = build_field_cpu(&b, band).unwrap();
+        assert_eq!(f.nearest, fresh.nearest, "step {k}");
+        let dist_bits = |f: &DistanceField| f.dist.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        assert_eq!(dist_bits(&f), dist_bits(&fresh), "step {k}");
         let afresh = f.clone();
         assert_eq!(bits(f.cells()), bits(afresh.cells()), "step {k}");
         // Counted in the builder's row spans, and in a copy (which has none) over every cell.

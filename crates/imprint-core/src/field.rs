@@ -155,7 +155,7 @@ pub struct LazyCells {
     /// the builder knew them: computing the cells and resetting them then skip a scan of
     /// `nearest` each (8 MiB, cold, for a 128³ grid), and so does [`DistanceField::band_cells`].
     /// Like the cells, they hold while no cell of the field changes (a clone has none).
-    spans: Option<Vec<[u32; 2]>>,
+    spans: Option<Arc<[[u32; 2]]>>,
 }
 
 /// A [`DistanceField::cells`] buffer in which every cell is far, `(0, 0, 0, -far)`: a field
@@ -170,7 +170,7 @@ impl LazyCells {
     /// The cache of a field built by the field stage (far cells hold exactly the far value),
     /// computed into `spare` when one is given; `spans` are the rows' band spans, if known
     /// (see [`band_span`]).
-    pub fn built(spare: Option<SpareCells>, spans: Option<Vec<[u32; 2]>>) -> Self {
+    pub fn built(spare: Option<SpareCells>, spans: Option<Arc<[[u32; 2]]>>) -> Self {
         LazyCells {
             cells: OnceLock::new(),
             spare: Mutex::new(spare),
@@ -345,6 +345,14 @@ impl DistanceField {
                 }
             });
         Some(SpareCells { buf, far })
+    }
+
+    /// Per row of the grid (`y + ny z`), its band span `[lo, hi)` as the builder found it,
+    /// if it did: outside its row's span every cell is far (`nearest` [`Self::FAR`], `dist`
+    /// the far value), which lets the builder reset the field's buffers for the next field
+    /// by writing only the spans. Holds while no cell of this field changes, as the cells do.
+    pub fn band_spans(&self) -> Option<Arc<[[u32; 2]]>> {
+        self.cells.spans.clone()
     }
 
     /// [`band_span`] of `row` (its cells' `nearest` in `near`), from the builder's spans

@@ -12,6 +12,7 @@
 //! - [`gltf`]: glTF 2.0 input: the skinned mesh, its skin and clips, and posing them by
 //!   linear blend skinning;
 //! - [`field`]: the discrete boundary and distance-field resources;
+//! - [`pool`]: scratch buffers the tasks of a parallel pass take and give back;
 //! - [`io`]: atomic file writing (nothing half-written under a final name);
 //! - [`error`]: the error type and what each kind means as an exit code.
 
@@ -28,6 +29,7 @@ pub mod heightfield;
 pub mod io;
 pub mod mesh;
 pub mod mesh_formats;
+pub mod pool;
 pub mod raster;
 
 pub use camera::Camera;

@@ -23,6 +23,7 @@ use glam::Vec3;
 use imprint_core::closest::{LANES, Pairs};
 use imprint_core::field::{LazyCells, SpareCells, band_span};
 use imprint_core::geom::{ceil_i, floor_i};
+use imprint_core::pool::Pool;
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -41,37 +42,67 @@ pub fn build_field_cpu(boundary: &Boundary, band: f32) -> Result<DistanceField> 
     FieldBuilder::default().build(boundary, band)
 }
 
+/// Per row (`y + ny z`) of a grid, a build's band span `[lo, hi)` (`lo == hi`: none).
+type Spans = Arc<[[u32; 2]]>;
+
 /// Builds fields frame after frame, reusing the buffers of fields given back with
 /// [`FieldBuilder::recycle`]: fresh grid-sized allocations cost page faults every frame.
 #[derive(Default)]
 pub struct FieldBuilder {
-    spare: Vec<Vec<u32>>,
-    spare_dist: Option<Vec<f32>>,
+    spare: Vec<Recycled<u32>>,
+    spare_dist: Option<Recycled<f32>>,
     /// The last recycled field's per-cell vectors, reset to far: the next field computes
     /// its own into them.
     spare_cells: Option<SpareCells>,
+    /// The splat's per-slab squared distances, shared by the builds.
+    scratch: Arc<Pool<Vec<f32>>>,
+}
+
+/// A grid-sized buffer given back, and what is known of it: outside the rows' `spans` every
+/// cell holds `clean`. A build cleans such a buffer by writing only the spans (a fifth of the
+/// bunny's 128³ cells), where writing every cell of the four buffers was 32 MiB a build.
+struct Recycled<T> {
+    buf: Vec<T>,
+    clean: T,
+    spans: Option<Spans>,
+}
+
+impl<T: Copy + PartialEq + Default> Recycled<T> {
+    /// A buffer of `n` cells, `rows` rows, to be cleaned to `clean`, and the spans to clean
+    /// when they are known for that value and grid (else every cell is cleaned). A fresh
+    /// buffer is zeroed lazily by the system (its pages are first touched by the build's
+    /// parallel cleaning).
+    fn take(this: Option<Self>, clean: T, n: usize, rows: usize) -> (Vec<T>, Option<Spans>) {
+        let Some(Recycled {
+            mut buf,
+            clean: was,
+            spans,
+        }) = this
+        else {
+            return (vec![T::default(); n], None);
+        };
+        let spans = spans.filter(|s| buf.len() == n && was == clean && s.len() == rows);
+        buf.resize(n, clean);
+        (buf, spans)
+    }
 }
 
 impl FieldBuilder {
-    /// Takes back a field nobody else holds, for its buffers.
+    /// Takes back a field nobody else holds, for its buffers. Its cells must not have been
+    /// changed since it was built (its band spans say where they can differ from far).
     pub fn recycle(&mut self, mut field: DistanceField) {
         self.spare_cells = field.take_spare_cells().or(self.spare_cells.take());
-        self.spare_dist = Some(field.dist);
-        self.spare.push(field.nearest);
-    }
-
-    /// A grid-sized buffer whose contents do not matter: every cell is written by the build
-    /// (the splat fills its layers before splatting, the refinement writes every cell) before
-    /// it is read. A fresh one is zeroed lazily by the system (no single-threaded pass over
-    /// 8 MiB first; the pages are touched by the build's parallel fills).
-    fn buffer_u32(&mut self, n: usize) -> Vec<u32> {
-        match self.spare.pop() {
-            Some(mut v) => {
-                v.resize(n, DistanceField::FAR);
-                v
-            }
-            None => vec![0; n],
-        }
+        let spans = field.band_spans();
+        self.spare_dist = Some(Recycled {
+            clean: field.far_value(),
+            buf: field.dist,
+            spans: spans.clone(),
+        });
+        self.spare.push(Recycled {
+            buf: field.nearest,
+            clean: DistanceField::FAR,
+            spans,
+        });
     }
 
     pub fn build(&mut self, boundary: &Boundary, band: f32) -> Result<DistanceField> {
@@ -105,15 +136,14 @@ impl FieldBuilder {
         } else {
             Vec::new()
         };
-        let dist = match self.spare_dist.take() {
-            Some(mut d) => {
-                d.resize(spec.len(), 0.0);
-                d
-            }
-            None => vec![0.0; spec.len()],
+        let (n, rows) = (spec.len(), spec.len() / spec.dims.x as usize);
+        let far = band * spec.cell;
+        let (dist, dist_dirt) = Recycled::take(self.spare_dist.take(), far, n, rows);
+        let (nearest, near_dirt) = Recycled::take(self.spare.pop(), DistanceField::FAR, n, rows);
+        let (owner, owner_dirt) = match refine {
+            true => Recycled::take(self.spare.pop(), DistanceField::FAR, n, rows),
+            false => Default::default(),
         };
-        let nearest = self.buffer_u32(spec.len());
-        let owner = refine.then(|| self.buffer_u32(spec.len()));
         Ok(FieldBuild {
             spec,
             band,
@@ -122,7 +152,13 @@ impl FieldBuilder {
             faces,
             dist,
             nearest,
-            owner,
+            owner: refine.then_some(owner),
+            dirt: Dirt {
+                nearest: near_dirt,
+                dist: dist_dirt,
+                owner: owner_dirt,
+            },
+            scratch: self.scratch.clone(),
             points: boundary.points.clone(),
             world_faces: refine.then(|| boundary.faces.clone()),
             inside: boundary.inside.clone(),
@@ -155,6 +191,11 @@ pub struct FieldBuild {
     nearest: Vec<u32>,
     /// The refined `nearest` (refinement only).
     owner: Option<Vec<u32>>,
+    /// Where the buffers may still hold a recycled field's values in layers not yet built.
+    dirt: Dirt,
+    /// The splat's per-slab squared distances (contents do not matter between slabs).
+    #[serde(skip)]
+    scratch: Arc<Pool<Vec<f32>>>,
     points: Vec<Vec3>,
     world_faces: Option<Vec<[Vec3; 3]>>,
     /// The boundary's inside cells: the field's sign.
@@ -164,6 +205,34 @@ pub struct FieldBuild {
     /// build checkpointed by a version that did not keep them): the field's cells use them.
     #[serde(default)]
     spans: Vec<[u32; 2]>,
+}
+
+/// Per buffer of a [`FieldBuild`], the spans outside which it is clean (the splat's `nearest`
+/// and `owner` [`DistanceField::FAR`], `dist` the far value), or None: every cell may hold
+/// anything. A part cleans its layers before writing them (the splat again the layer it
+/// shares with the next part, whose values it then writes again: the same values).
+#[derive(Default, Serialize, Deserialize)]
+struct Dirt {
+    nearest: Option<Spans>,
+    dist: Option<Spans>,
+    owner: Option<Spans>,
+}
+
+/// Cleans `buf`, whole rows of `nx` cells from row `first_row` on, to `value`: only each
+/// row's span where `spans` are known, every cell otherwise.
+fn clean<T: Copy>(
+    buf: &mut [T],
+    value: T,
+    spans: Option<&[[u32; 2]]>,
+    first_row: usize,
+    nx: usize,
+) {
+    let Some(spans) = spans else {
+        return buf.fill(value);
+    };
+    for (row, &[lo, hi]) in buf.chunks_mut(nx).zip(&spans[first_row..]) {
+        row[lo as usize..hi as usize].fill(value);
+    }
 }
 
 impl FieldBuild {
@@ -190,7 +259,8 @@ impl FieldBuild {
     }
 
     /// Phase 1 over layers `z`: per cell the strictly nearest point within the band (squared
-    /// grid distance in `dist`; world distance straight away when nothing refines it).
+    /// grid distances in a slab's scratch; world distances in `dist` straight away when
+    /// nothing refines them).
     fn splat(&mut self, z: std::ops::Range<usize>) {
         let spec = self.spec;
         let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
@@ -205,16 +275,19 @@ impl FieldBuild {
         let fast = band <= (WINDOW / 2 - 1) as f32;
         let refine = self.owner.is_some();
         let (pts, cell_z) = (&self.pts, &self.cell_z);
+        let (dirt, scratch) = (self.dirt.nearest.as_deref(), &*self.scratch);
         let range = z.start * nxy..z.end * nxy;
         self.dist[range.clone()]
             .par_chunks_mut(nxy * SLAB_LAYERS)
             .zip(self.nearest[range].par_chunks_mut(nxy * SLAB_LAYERS))
             .enumerate()
-            .for_each(|(slab, (d2s, near))| {
+            .for_each(|(slab, (dist, near))| {
                 let z0 = z.start + slab * SLAB_LAYERS;
                 let z1 = (z0 + SLAB_LAYERS).min(z.end);
-                d2s.fill(unset);
-                near.fill(DistanceField::FAR);
+                clean(near, DistanceField::FAR, dirt, z0 * ny, nx);
+                let mut d2s = scratch.take(Vec::new);
+                d2s.clear();
+                d2s.resize(near.len(), unset);
                 let first = cell_z.partition_point(|&z| z + reach < z0);
                 let last = cell_z.partition_point(|&z| z <= z1 - 1 + reach);
                 let slab = Slab {
@@ -226,16 +299,18 @@ impl FieldBuild {
                     ny,
                     fast,
                 };
-                splat_slab(&slab, &pts[first..last.max(first)], first, d2s, near);
+                splat_slab(&slab, &pts[first..last.max(first)], first, &mut d2s, near);
+                // Refined builds write their own distances; point distances are final.
                 if !refine {
-                    for (d, n) in d2s.iter_mut().zip(near.iter()) {
-                        *d = if *n == DistanceField::FAR {
+                    for ((d, &d2), &n) in dist.iter_mut().zip(&d2s).zip(near.iter()) {
+                        *d = if n == DistanceField::FAR {
                             far
                         } else {
-                            d.sqrt() * spec.cell
+                            d2.sqrt() * spec.cell
                         };
                     }
                 }
+                scratch.give(d2s);
             });
     }
 
@@ -263,6 +338,7 @@ impl FieldBuild {
             &self.nearest,
             &mut owner[z.start * nxy..z.end * nxy],
             spans,
+            [self.dirt.dist.as_deref(), self.dirt.owner.as_deref()],
             z.start * nxy,
             &self.faces,
             dims,
@@ -274,10 +350,16 @@ impl FieldBuild {
     /// The field (after every part ran); the splat's buffer goes back to `builder`.
     pub fn finish(self, builder: &mut FieldBuilder) -> DistanceField {
         let rows = self.spec.len() / self.spec.dims.x as usize;
-        let spans = (self.owner.is_some() && self.spans.len() == rows).then_some(self.spans);
+        let spans: Option<Spans> =
+            (self.owner.is_some() && self.spans.len() == rows).then(|| self.spans.into());
         let nearest = match self.owner {
             Some(owner) => {
-                builder.spare.push(self.nearest);
+                // The splat reached exactly the band cells, so it too is far off the spans.
+                builder.spare.push(Recycled {
+                    buf: self.nearest,
+                    clean: DistanceField::FAR,
+                    spans: spans.clone(),
+                });
                 owner
             }
             None => self.nearest,
@@ -298,14 +380,15 @@ impl FieldBuild {
 /// The refinement pass: per band cell, the exact distance to the best owning triangle among
 /// its nearest point's and its six neighbours' nearest points'. Writes the new `nearest`
 /// in `owner` (the point whose triangle won; ties to the smaller index) and writes world
-/// distances. `dist` and `owner` are the layers starting at cell `offset`, `spans` their
-/// rows' band spans (written).
+/// distances. `dist` and `owner` are the layers starting at cell `offset`, cleaned first
+/// (far) where `dirt` says their old values may be, `spans` their rows' band spans (written).
 #[allow(clippy::too_many_arguments)]
 fn refine_to_faces(
     dist: &mut [f32],
     nearest: &[u32],
     owner: &mut [u32],
     spans: &mut [[u32; 2]],
+    [dist_dirt, owner_dirt]: [Option<&[[u32; 2]]>; 2],
     offset: usize,
     faces: &[[Vec3; 3]],
     (nx, ny, nz): (usize, usize, usize),
@@ -320,6 +403,8 @@ fn refine_to_faces(
         .enumerate()
         .for_each(|(slab, ((dist, owner), row_spans))| {
             let base = offset + slab * nxy * SLAB_LAYERS;
+            clean(dist, far, dist_dirt, base / nx, nx);
+            clean(owner, DistanceField::FAR, owner_dirt, base / nx, nx);
             let mut group = Group::default();
             // A group's best squared distances to world distances, in place.
             let flush = |group: &mut Group, dist: &mut [f32], owner: &mut [u32]| {
@@ -330,29 +415,20 @@ fn refine_to_faces(
                 }
                 group.len = 0;
             };
-            // Each row's cells from its first to its last band cell; the rest are far, and
-            // written as runs (nine cells in ten of a 128³ grid are far).
+            // Each row's band cells, between its first and its last (the far ones, nine cells
+            // in ten of a 128³ grid, are clean already).
             for (r, span) in row_spans.iter_mut().enumerate() {
                 let row = r * nx;
                 let (y, z) = (r % ny, base / nxy + r / ny);
                 let Some(xs) = band_span(&nearest[base + row..base + row + nx]) else {
-                    dist[row..row + nx].fill(far);
-                    owner[row..row + nx].fill(DistanceField::FAR);
                     *span = [0, 0];
                     continue;
                 };
                 *span = [xs.start as u32, xs.end as u32];
-                dist[row..row + xs.start].fill(far);
-                owner[row..row + xs.start].fill(DistanceField::FAR);
-                dist[row + xs.end..row + nx].fill(far);
-                owner[row + xs.end..row + nx].fill(DistanceField::FAR);
                 for x in xs {
                     let k = row + x;
                     let n = nearest[base + k];
-                    if n == DistanceField::FAR {
-                        dist[k] = far;
-                        owner[k] = DistanceField::FAR;
-                    } else if grid.add(&mut group, base + k, [x, y, z], n) {
+                    if n != DistanceField::FAR && grid.add(&mut group, base + k, [x, y, z], n) {
                         flush(&mut group, dist, owner);
                     }
                 }

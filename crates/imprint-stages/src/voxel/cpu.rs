@@ -19,9 +19,9 @@ use glam::{IVec3, UVec3, Vec3};
 use imprint_core::buckets::Buckets;
 use imprint_core::closest::Batch;
 use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
+use imprint_core::pool::Pool;
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
-use std::sync::Mutex;
 
 /// Half-size of the closed cell box in the overlap test: a hair over 0.5 so that a triangle
 /// lying exactly on a cell face marks both cells even after rounding.
@@ -38,7 +38,7 @@ pub struct Voxelizer {
     spec: GridSpec,
     /// Scratch for the slabs being worked on (one per task running at once, made on demand),
     /// given back clean: a one-shot run allocates a few slabs' worth, not the grid's.
-    pool: Mutex<Vec<SlabScratch>>,
+    pool: Pool<SlabScratch>,
     /// Mark the cells inside a closed mesh ([`Boundary::inside`]: the field's sign); on by
     /// default, off where nothing reads the sign.
     pub signed: bool,
@@ -76,7 +76,7 @@ impl Voxelizer {
         spec.check_memory("voxelisation inside bits", 1)?;
         Ok(Voxelizer {
             spec,
-            pool: Mutex::new(Vec::new()),
+            pool: Pool::default(),
             signed: true,
             closed: ClosedCache::default(),
         })
@@ -109,8 +109,7 @@ impl Voxelizer {
             .into_par_iter()
             .map(|slab| {
                 let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
-                let taken = pool.lock().ok().and_then(|mut p| p.pop());
-                let mut scratch = taken.unwrap_or_else(|| SlabScratch::new(nxy));
+                let mut scratch = pool.take(|| SlabScratch::new(nxy));
                 let best = &mut scratch.best[..z.len() * nxy];
                 propose_slab(
                     &scene,
@@ -120,9 +119,7 @@ impl Voxelizer {
                     &mut scratch.occupied,
                 );
                 let part = collect_slab(&scene, z.start * nxy, best, &mut scratch.occupied);
-                if let Ok(mut p) = pool.lock() {
-                    p.push(scratch);
-                }
+                pool.give(scratch);
                 part
             })
             .collect();
