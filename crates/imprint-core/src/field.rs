@@ -43,19 +43,32 @@ pub struct Boundary {
 }
 
 /// The cells of a row of `nearest` from its first to its last band cell (None: all far).
-/// Eight cells at a time, a test that vectorises.
+/// Whole groups of eight cells are tested at once (a fixed-size test that vectorises; inlined,
+/// so a caller compiled for AVX2 makes it one compare), the few cells past them one by one.
+#[inline(always)]
 pub fn band_span(row: &[u32]) -> Option<std::ops::Range<usize>> {
-    let far8 = |c: &[u32]| {
-        c.iter()
+    let near = |n: &u32| *n != DistanceField::FAR;
+    let groups = row.len() / 8;
+    let group = |j: usize| -> &[u32; 8] { row[j * 8..j * 8 + 8].try_into().unwrap() };
+    let far8 = |j: usize| {
+        group(j)
+            .iter()
             .fold(true, |all, &n| all & (n == DistanceField::FAR))
     };
-    let chunks = row.len().div_ceil(8);
-    let chunk = |j: usize| &row[j * 8..(j * 8 + 8).min(row.len())];
-    let first = (0..chunks).find(|&j| !far8(chunk(j)))?;
-    let last = (first..chunks).rev().find(|&j| !far8(chunk(j)))?;
-    let lo = first * 8 + chunk(first).iter().position(|&n| n != DistanceField::FAR)?;
-    let hi = last * 8 + chunk(last).iter().rposition(|&n| n != DistanceField::FAR)?;
-    Some(lo..hi + 1)
+    let rest = &row[groups * 8..];
+    let first = match (0..groups).find(|&j| !far8(j)) {
+        Some(j) => j * 8 + group(j).iter().position(near)?,
+        None => groups * 8 + rest.iter().position(near)?,
+    };
+    let last = match rest.iter().rposition(near) {
+        Some(i) => groups * 8 + i,
+        // A band cell is in a group (the first one found), so some group is not far.
+        None => {
+            let j = (0..groups).rev().find(|&j| !far8(j))?;
+            j * 8 + group(j).iter().rposition(near)?
+        }
+    };
+    Some(first..last + 1)
 }
 
 /// Bit `i` of a bitset stored as 32-bit words (bit `i % 32` of word `i / 32`).
@@ -574,5 +587,41 @@ impl DistanceField {
                 in_band: all_in,
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The plain scan `band_span` must equal: first and last cell that is not far.
+    fn plain_span(row: &[u32]) -> Option<std::ops::Range<usize>> {
+        let first = row.iter().position(|&n| n != DistanceField::FAR)?;
+        let last = row.iter().rposition(|&n| n != DistanceField::FAR)?;
+        Some(first..last + 1)
+    }
+
+    #[test]
+    fn band_span_is_the_plain_scans_span_for_every_length_and_place() {
+        const FAR: u32 = DistanceField::FAR;
+        // Rows of every length up to three groups and a few past, each all far, with one band
+        // cell at each place, and with two band cells at every pair of places.
+        for len in 0..30 {
+            let far = vec![FAR; len];
+            assert_eq!(band_span(&far), None, "all far, length {len}");
+            for i in 0..len {
+                for j in i..len {
+                    let mut row = far.clone();
+                    (row[i], row[j]) = (7, 9);
+                    assert_eq!(band_span(&row), plain_span(&row), "length {len}: {i}, {j}");
+                    assert_eq!(band_span(&row), Some(i..j + 1));
+                }
+            }
+        }
+        // A full grid row with band cells spread in it.
+        let row: Vec<u32> = (0..128u32)
+            .map(|x| if x % 37 == 5 { x } else { FAR })
+            .collect();
+        assert_eq!(band_span(&row), Some(5..117));
     }
 }

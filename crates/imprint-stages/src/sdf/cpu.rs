@@ -405,38 +405,84 @@ fn refine_to_faces(
             let base = offset + slab * nxy * SLAB_LAYERS;
             clean(dist, far, dist_dirt, base / nx, nx);
             clean(owner, DistanceField::FAR, owner_dirt, base / nx, nx);
-            let mut group = Group::default();
-            // A group's best squared distances to world distances, in place.
-            let flush = |group: &mut Group, dist: &mut [f32], owner: &mut [u32]| {
-                let (d2, n) = grid.best_faces(group, faces);
-                for l in 0..group.len {
-                    let k = group.cells.index[l] - base;
-                    (dist[k], owner[k]) = (d2[l].sqrt() * cell, n[l]);
-                }
-                group.len = 0;
+            let slab = RefineSlab {
+                grid: &grid,
+                faces,
+                base,
+                cell,
             };
-            // Each row's band cells, between its first and its last (the far ones, nine cells
-            // in ten of a 128³ grid, are clean already).
-            for (r, span) in row_spans.iter_mut().enumerate() {
-                let row = r * nx;
-                let (y, z) = (r % ny, base / nxy + r / ny);
-                let Some(xs) = band_span(&nearest[base + row..base + row + nx]) else {
-                    *span = [0, 0];
-                    continue;
-                };
-                *span = [xs.start as u32, xs.end as u32];
-                for x in xs {
-                    let k = row + x;
-                    let n = nearest[base + k];
-                    if n != DistanceField::FAR && grid.add(&mut group, base + k, [x, y, z], n) {
-                        flush(&mut group, dist, owner);
-                    }
+            slab.run(dist, owner, row_spans);
+        });
+}
+
+/// One slab's refinement: its layers' cells from grid index `base` on.
+struct RefineSlab<'a> {
+    grid: &'a Neighbours<'a>,
+    faces: &'a [[Vec3; 3]],
+    base: usize,
+    cell: f32,
+}
+
+impl RefineSlab<'_> {
+    /// Refines the slab's band cells into `dist` and `owner` (its layers) and writes its rows'
+    /// band spans, compiled for AVX2 where the CPU has it (decided once per process): the
+    /// same operations, so the same bits, with the rows' scans and the candidates' selects
+    /// eight lanes to an instruction.
+    fn run(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.run_avx2(dist, owner, row_spans) };
+        }
+        self.run_lanes(dist, owner, row_spans)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
+        self.run_lanes(dist, owner, row_spans)
+    }
+
+    #[inline(always)]
+    fn run_lanes(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
+        let (grid, base) = (self.grid, self.base);
+        let (nx, ny, _) = grid.dims;
+        let nxy = nx * ny;
+        let nearest = grid.nearest;
+        let mut group = Group::default();
+        // Each row's band cells, between its first and its last (the far ones, nine cells
+        // in ten of a 128³ grid, are clean already).
+        for (r, span) in row_spans.iter_mut().enumerate() {
+            let row = r * nx;
+            let (y, z) = (r % ny, base / nxy + r / ny);
+            let Some(xs) = band_span(&nearest[base + row..base + row + nx]) else {
+                *span = [0, 0];
+                continue;
+            };
+            *span = [xs.start as u32, xs.end as u32];
+            for x in xs {
+                let k = row + x;
+                let n = nearest[base + k];
+                if n != DistanceField::FAR && grid.add(&mut group, base + k, [x, y, z], n) {
+                    self.flush(&mut group, dist, owner);
                 }
             }
-            if group.len > 0 {
-                flush(&mut group, dist, owner);
-            }
-        });
+        }
+        if group.len > 0 {
+            self.flush(&mut group, dist, owner);
+        }
+    }
+
+    /// A group's best squared distances to world distances, in place.
+    #[inline(always)]
+    fn flush(&self, group: &mut Group, dist: &mut [f32], owner: &mut [u32]) {
+        let (d2, n) = self.grid.best_faces(group, self.faces);
+        for l in 0..group.len {
+            let k = group.cells.index[l] - self.base;
+            (dist[k], owner[k]) = (d2[l].sqrt() * self.cell, n[l]);
+        }
+        group.len = 0;
+    }
 }
 
 /// Up to [`LANES`] band cells waiting for their best triangles: one cell per lane.
@@ -448,13 +494,14 @@ struct Group {
     len: usize,
 }
 
-/// Per lane: the cell's grid index, its nearest point, and which of its six neighbours are
-/// in the grid (bit s: `Neighbours::steps[s]`).
+/// Per lane: the cell's grid index, its nearest point, and its six neighbours' nearest points
+/// (`cands[s]`: `Neighbours::steps[s]` away; the cell's own where that one is far or off the
+/// grid).
 #[derive(Default)]
 struct Cells {
     index: [usize; LANES],
     own: [u32; LANES],
-    inside: [u8; LANES],
+    cands: [[u32; LANES]; 6],
 }
 
 /// The splatted nearest points of the whole grid, read around a cell.
@@ -475,8 +522,9 @@ impl<'a> Neighbours<'a> {
         }
     }
 
-    /// Queues band cell `i` at `[x, y, z]` (nearest point `n`); true when the group is full.
-    #[inline]
+    /// Queues band cell `i` at `[x, y, z]` (nearest point `n`) and its neighbours'
+    /// candidates, read while the cell's rows are in cache; true when the group is full.
+    #[inline(always)]
     fn add(&self, group: &mut Group, i: usize, [x, y, z]: [usize; 3], n: u32) -> bool {
         let (nx, ny, nz) = self.dims;
         let l = group.len;
@@ -485,32 +533,16 @@ impl<'a> Neighbours<'a> {
             .set_point(l, Vec3::new(x as f32, y as f32, z as f32));
         group.cells.index[l] = i;
         group.cells.own[l] = n;
-        group.cells.inside[l] = (x > 0) as u8
-            | ((x + 1 < nx) as u8) << 1
-            | ((y > 0) as u8) << 2
-            | ((y + 1 < ny) as u8) << 3
-            | ((z > 0) as u8) << 4
-            | ((z + 1 < nz) as u8) << 5;
+        let inside = [x > 0, x + 1 < nx, y > 0, y + 1 < ny, z > 0, z + 1 < nz];
+        for (s, (&step, inside)) in self.steps.iter().zip(inside).enumerate() {
+            let m = match inside {
+                true => self.nearest[i.wrapping_add_signed(step)],
+                false => DistanceField::FAR,
+            };
+            group.cells.cands[s][l] = if m == DistanceField::FAR { n } else { m };
+        }
         group.len += 1;
         group.len == LANES
-    }
-
-    /// Per lane of `group`: the nearest point of the neighbour `step` away (bit `s` of the
-    /// lane's `inside`), or the lane's own where that is far or off the grid.
-    #[inline]
-    fn neighbour_cands(&self, cells: &Cells, s: usize, step: isize) -> [u32; LANES] {
-        std::array::from_fn(|l| {
-            let n = if cells.inside[l] >> s & 1 == 1 {
-                self.nearest[cells.index[l].wrapping_add_signed(step)]
-            } else {
-                DistanceField::FAR
-            };
-            if n == DistanceField::FAR {
-                cells.own[l]
-            } else {
-                n
-            }
-        })
     }
 
     /// Per lane of `group`: the squared grid distance to the best triangle of its cell's
@@ -519,30 +551,39 @@ impl<'a> Neighbours<'a> {
     /// cell's own), so no lane waits on another's candidates; a minimum, so repeats and
     /// order do not change it. Lanes past the group's length take its first cell's
     /// candidates (their results are not used).
-    #[inline]
+    #[inline(always)]
     fn best_faces(&self, group: &mut Group, faces: &[[Vec3; 3]]) -> (Lanes, [u32; LANES]) {
+        let c = &mut group.cells;
         for l in group.len..LANES {
-            let c = &mut group.cells;
-            (c.index[l], c.own[l], c.inside[l]) = (c.index[0], c.own[0], c.inside[0]);
+            (c.index[l], c.own[l]) = (c.index[0], c.own[0]);
+            c.cands.iter_mut().for_each(|cands| cands[l] = cands[0]);
         }
         let mut best = ([f32::INFINITY; LANES], [u32::MAX; LANES]);
-        let pairs = &mut group.pairs;
-        let mut try_slot = |cands: &[u32; LANES]| {
-            pairs.set_triangles(faces, cands);
-            let d2 = pairs.closest().d2;
-            // Selects, not branches: which candidate wins is a coin toss to the predictor.
-            for l in 0..LANES {
-                let (d, o, n) = (best.0[l], best.1[l], cands[l]);
-                let better = (d2[l] < d) | ((d2[l] == d) & (n < o));
-                best.0[l] = if better { d2[l] } else { d };
-                best.1[l] = if better { n } else { o };
-            }
-        };
-        try_slot(&group.cells.own);
-        for (s, step) in self.steps.into_iter().enumerate() {
-            try_slot(&self.neighbour_cands(&group.cells, s, step));
+        keep_better(&mut best, &mut group.pairs, faces, &c.own);
+        for cands in &c.cands {
+            keep_better(&mut best, &mut group.pairs, faces, cands);
         }
         best
+    }
+}
+
+/// Keeps in `best`, per lane, the nearer of its triangle and the lane's triangle of `cands`
+/// (ties to the smaller index), by selects, not branches: which candidate wins is a coin
+/// toss to the predictor.
+#[inline(always)]
+fn keep_better(
+    best: &mut (Lanes, [u32; LANES]),
+    pairs: &mut Pairs,
+    faces: &[[Vec3; 3]],
+    cands: &[u32; LANES],
+) {
+    pairs.set_triangles(faces, cands);
+    let d2 = pairs.closest().d2;
+    for l in 0..LANES {
+        let (d, o, n) = (best.0[l], best.1[l], cands[l]);
+        let better = (d2[l] < d) | ((d2[l] == d) & (n < o));
+        best.0[l] = if better { d2[l] } else { d };
+        best.1[l] = if better { n } else { o };
     }
 }
 
@@ -641,17 +682,32 @@ fn splat_point_window<const AVX2: bool>(
     let zhi = floor_i(p.z + band + SLACK).min(z1 as i32 - 1);
     let ylo = ceil_i(p.y - band - SLACK).max(0);
     let yhi = floor_i(p.y + band + SLACK).min(ny as i32 - 1);
-    for z in zlo..=zhi {
+    if ylo > yhi {
+        return true;
+    }
+    let (ylo, yhi) = (ylo as usize, yhi as usize);
+    for z in zlo..zhi + 1 {
         let dz = z as f32 - p.z;
-        for y in ylo..=yhi {
+        // The same value as `dz * dz` in each row's sum.
+        let dz2 = dz * dz;
+        let layer = (z as usize - z0) * nx * ny + x0;
+        // Every window row of the layer is in both buffers (one test per layer, not per row).
+        let end = layer + yhi * nx + WINDOW;
+        assert!(end <= d2s.len() && end <= near.len());
+        for y in ylo..yhi + 1 {
             let dy = y as f32 - p.y;
-            let dyz2 = dy * dy + dz * dz;
+            let dyz2 = dy * dy + dz2;
             if dyz2 > a2 {
                 continue;
             }
-            let row = (z as usize - z0) * nx * ny + y as usize * nx + x0;
-            let d_row: &mut [f32; WINDOW] = (&mut d2s[row..row + WINDOW]).try_into().unwrap();
-            let n_row: &mut [u32; WINDOW] = (&mut near[row..row + WINDOW]).try_into().unwrap();
+            let row = layer + y * nx;
+            // SAFETY: row + WINDOW <= end (tested above), and the buffers do not alias.
+            let (d_row, n_row) = unsafe {
+                (
+                    &mut *d2s.as_mut_ptr().add(row).cast::<[f32; WINDOW]>(),
+                    &mut *near.as_mut_ptr().add(row).cast::<[u32; WINDOW]>(),
+                )
+            };
             #[cfg(target_arch = "x86_64")]
             if AVX2 {
                 // SAFETY: AVX2 is only set by `splat_slab_avx2`, which runs with AVX2.
