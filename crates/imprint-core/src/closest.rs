@@ -64,7 +64,7 @@ impl Pairs {
     /// outside the kernel); the same values either way.
     #[inline]
     pub fn set_triangles(&mut self, faces: &[[Vec3; 3]], idx: &[u32; LANES]) {
-        // Every lane tested, no early exit: one compare per eight lanes.
+        // Every lane tested, no early exit, so the test vectorises (a compare per vector).
         let len = faces.len().min(u32::MAX as usize) as u32;
         assert!(idx.iter().fold(true, |ok, &n| ok & (n < len)));
         #[cfg(target_arch = "x86_64")]
