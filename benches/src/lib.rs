@@ -10,8 +10,9 @@ pub mod skin;
 pub mod stages_gpu;
 pub mod view;
 
-use imprint_core::{DistanceField, GridSpec, Mesh};
+use imprint_core::{BoundaryVariant, DistanceField, GridSpec, Mesh};
 use imprint_stages::metrics::FieldError;
+use imprint_stages::{sdf::cpu::build_field_cpu, voxel::cpu::voxelize_cpu};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -203,8 +204,6 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
 /// Voxelise + field of `mesh` on `spec` with nothing kept between calls (a new voxeliser and
 /// field builder each time, as a one-shot `imprint field` has), median of `repeat`, ms.
 fn one_shot_ms(mesh: &Mesh, spec: &GridSpec, band: f32, repeat: usize) -> f64 {
-    use imprint_core::BoundaryVariant;
-    use imprint_stages::{sdf::cpu::build_field_cpu, voxel::cpu::voxelize_cpu};
     median_ms(repeat, || {
         let boundary = voxelize_cpu(mesh, spec, BoundaryVariant::Closest).expect("voxelise");
         std::hint::black_box(build_field_cpu(&boundary, band).expect("field"));

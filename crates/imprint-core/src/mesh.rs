@@ -25,16 +25,7 @@ impl Mesh {
     pub fn is_closed(&self) -> bool {
         // Each vertex as the first index with its position, bit for bit: an edge of these ids
         // is an edge by position, and ids bucket where positions would have to be sorted.
-        // Found by hashing the positions' bits in index order (sorting the vertices by them
-        // was half the test's time on the bunny).
-        let mut first = rustc_hash::FxHashMap::default();
-        first.reserve(self.positions.len());
-        let canon: Vec<u32> = (0..self.positions.len() as u32)
-            .map(|i| {
-                let key = self.positions[i as usize].to_array().map(f32::to_bits);
-                *first.entry(key).or_insert(i)
-            })
-            .collect();
+        let canon = self.first_with_position();
         // The edges grouped by their smaller end (a counting sort), then each group's other
         // ends sorted: a vertex has a handful of edges, so this is linear where one sort of
         // all the edges took most of the test (the bunny's 208k edges).
@@ -52,6 +43,20 @@ impl Mesh {
             ends.sort_unstable();
             ends.chunk_by(|a, b| a == b).all(|run| run.len() % 2 == 0)
         })
+    }
+
+    /// Per vertex, the first index with its position bit for bit: the ids by which
+    /// [`Mesh::is_closed`] and [`Mesh::welded`] compare vertices. Hashed in index order
+    /// (sorting the vertices by their bits was half of `is_closed`'s time on the bunny).
+    fn first_with_position(&self) -> Vec<u32> {
+        let mut first = rustc_hash::FxHashMap::default();
+        first.reserve(self.positions.len());
+        (0..self.positions.len() as u32)
+            .map(|i| {
+                let key = self.positions[i as usize].to_array().map(f32::to_bits);
+                *first.entry(key).or_insert(i)
+            })
+            .collect()
     }
 
     /// The signed volume enclosed (divergence theorem, in f64): positive when a closed mesh
@@ -76,21 +81,19 @@ impl Mesh {
     /// [`Mesh::welded`] and, per vertex of the result, the vertex of `self` it was first
     /// (to carry per-vertex data such as skin weights across).
     pub fn welded_with_map(&self) -> (Mesh, Vec<u32>) {
-        let mut first = rustc_hash::FxHashMap::default();
+        let canon = self.first_with_position();
         let mut positions = Vec::new();
         let mut origin = Vec::new();
-        let remap: Vec<u32> = self
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                *first
-                    .entry(p.to_array().map(f32::to_bits))
-                    .or_insert_with(|| {
-                        origin.push(i as u32);
-                        positions.push(*p);
-                        positions.len() as u32 - 1
-                    })
+        // New ids in order of first appearance; a vertex's first index is never after it.
+        let mut id = vec![0u32; canon.len()];
+        let remap: Vec<u32> = (0..canon.len())
+            .map(|i| {
+                if canon[i] as usize == i {
+                    id[i] = positions.len() as u32;
+                    origin.push(i as u32);
+                    positions.push(self.positions[i]);
+                }
+                id[canon[i] as usize]
             })
             .collect();
         let mut m = Mesh {
@@ -606,6 +609,16 @@ mod tests {
         assert!(w.is_closed() && w.boundary_loops().is_empty());
         for (v, &o) in origin.iter().enumerate() {
             assert_eq!(w.positions[v], split.positions[o as usize]);
+            // The first index wins, and ids follow first appearance.
+            let first = split.positions.iter().position(|p| *p == w.positions[v]);
+            assert_eq!(first, Some(o as usize));
+        }
+        assert!(origin.windows(2).all(|o| o[0] < o[1]));
+        for (t, u) in split.triangles.iter().zip(&w.triangles) {
+            assert_eq!(
+                t.map(|i| split.positions[i as usize]),
+                u.map(|i| w.positions[i as usize])
+            );
         }
     }
 
