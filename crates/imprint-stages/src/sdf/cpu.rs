@@ -56,6 +56,8 @@ pub struct FieldBuilder {
     spare_cells: Option<SpareCells>,
     /// The splat's per-slab squared distances, shared by the builds.
     scratch: Arc<Pool<Vec<f32>>>,
+    /// The refinement's per-slab owners, shared by the builds.
+    owners: Arc<Pool<Vec<Owned>>>,
 }
 
 /// A grid-sized buffer given back, and what is known of it: outside the rows' `spans` every
@@ -140,10 +142,6 @@ impl FieldBuilder {
         let far = band * spec.cell;
         let (dist, dist_dirt) = Recycled::take(self.spare_dist.take(), far, n, rows);
         let (nearest, near_dirt) = Recycled::take(self.spare.pop(), DistanceField::FAR, n, rows);
-        let (owner, owner_dirt) = match refine {
-            true => Recycled::take(self.spare.pop(), DistanceField::FAR, n, rows),
-            false => Default::default(),
-        };
         Ok(FieldBuild {
             spec,
             band,
@@ -152,13 +150,14 @@ impl FieldBuilder {
             faces,
             dist,
             nearest,
-            owner: refine.then_some(owner),
+            refine,
+            pending: Vec::new(),
             dirt: Dirt {
                 nearest: near_dirt,
                 dist: dist_dirt,
-                owner: owner_dirt,
             },
             scratch: self.scratch.clone(),
+            owners: self.owners.clone(),
             points: boundary.points.clone(),
             world_faces: refine.then(|| boundary.faces.clone()),
             inside: boundary.inside.clone(),
@@ -173,8 +172,11 @@ impl FieldBuilder {
 
 /// A field being built in parts: each part splats the boundary points into its z-layers
 /// (and one layer more, which the next part splats again to the same values) and refines its
-/// layers, whose six neighbours are then all splatted. Cells do not depend on how the grid is
-/// cut, so any number of parts gives the same field.
+/// layers, whose six neighbours are then all splatted. The refined owners replace the splat's
+/// nearest points in place (a second grid-sized buffer was a third of a fresh build's first
+/// touches), once no layer left to refine reads them: a part's last layer waits in
+/// `pending` until the next part has refined its first. Cells do not depend on how the grid
+/// is cut, so any number of parts gives the same field.
 ///
 /// Serde writes all of it, so a build can be checkpointed between parts and finished after
 /// loading (with any [`FieldBuilder`]: the builder only lends buffers).
@@ -188,34 +190,42 @@ pub struct FieldBuild {
     /// Owning triangles in grid units (refinement only).
     faces: Vec<[Vec3; 3]>,
     dist: Vec<f32>,
+    /// The splat's nearest points, and the refined owners over them in the refined layers.
     nearest: Vec<u32>,
-    /// The refined `nearest` (refinement only).
-    owner: Option<Vec<u32>>,
+    /// Whether the cells are refined to their triangles (a `Closest` boundary).
+    refine: bool,
+    /// The last refined layer's owners, not yet written over the nearest points the next
+    /// part's first layer reads.
+    pending: Vec<Owned>,
     /// Where the buffers may still hold a recycled field's values in layers not yet built.
     dirt: Dirt,
     /// The splat's per-slab squared distances (contents do not matter between slabs).
     #[serde(skip)]
     scratch: Arc<Pool<Vec<f32>>>,
+    /// The refinement's per-slab owners (contents do not matter between slabs).
+    #[serde(skip)]
+    owners: Arc<Pool<Vec<Owned>>>,
     points: Vec<Vec3>,
     world_faces: Option<Vec<[Vec3; 3]>>,
     /// The boundary's inside cells: the field's sign.
     #[serde(default)]
     inside: Option<Vec<u32>>,
-    /// Per row (`y + ny z`), the band span the refinement found (refinement only; empty in a
-    /// build checkpointed by a version that did not keep them): the field's cells use them.
-    #[serde(default)]
+    /// Per row (`y + ny z`), the band span the refinement found (refinement only): the
+    /// field's cells use them.
     spans: Vec<[u32; 2]>,
 }
 
-/// Per buffer of a [`FieldBuild`], the spans outside which it is clean (the splat's `nearest`
-/// and `owner` [`DistanceField::FAR`], `dist` the far value), or None: every cell may hold
-/// anything. A part cleans its layers before writing them (the splat again the layer it
-/// shares with the next part, whose values it then writes again: the same values).
+/// A band cell's grid index (below 2^32, as [`Boundary::cells`]) and its refined owner.
+type Owned = [u32; 2];
+
+/// Per buffer of a [`FieldBuild`], the spans outside which it is clean (`nearest`
+/// [`DistanceField::FAR`], `dist` the far value), or None: every cell may hold anything. A
+/// part cleans its layers before writing them (the splat again the layer it shares with the
+/// next part, whose values it then writes again: the same values).
 #[derive(Default, Serialize, Deserialize)]
 struct Dirt {
     nearest: Option<Spans>,
     dist: Option<Spans>,
-    owner: Option<Spans>,
 }
 
 /// Cleans `buf`, whole rows of `nx` cells from row `first_row` on, to `value`: only each
@@ -250,7 +260,7 @@ impl FieldBuild {
         if z.is_empty() {
             return;
         }
-        if self.owner.is_some() {
+        if self.refine {
             self.splat(z.start..(z.end + 1).min(nz));
             self.refine(z);
         } else {
@@ -273,7 +283,7 @@ impl FieldBuild {
         let far = band * spec.cell;
         // Bands up to WINDOW/2 - 1 cells take the fixed-window splat.
         let fast = band <= (WINDOW / 2 - 1) as f32;
-        let refine = self.owner.is_some();
+        let refine = self.refine;
         let (pts, cell_z) = (&self.pts, &self.cell_z);
         let (dirt, scratch) = (self.dirt.nearest.as_deref(), &*self.scratch);
         let range = z.start * nxy..z.end * nxy;
@@ -314,7 +324,10 @@ impl FieldBuild {
             });
     }
 
-    /// Phase 2 over layers `z` (their neighbours splatted): see [`refine_to_faces`].
+    /// Phase 2 over layers `z` (their neighbours splatted): see [`refine_to_faces`]. The
+    /// owners then go over the nearest points of every layer no refinement still reads: the
+    /// previous part's last layer, and all of `z` but its last when a part follows (whose
+    /// first layer reads it as splatted), which waits in `pending`.
     fn refine(&mut self, z: std::ops::Range<usize>) {
         let spec = self.spec;
         let dims = (
@@ -322,53 +335,45 @@ impl FieldBuild {
             spec.dims.y as usize,
             spec.dims.z as usize,
         );
-        let nxy = dims.0 * dims.1;
-        let owner = self.owner.as_mut().expect("refining builds have owners");
-        let rows = z.start * dims.1..z.end * dims.1;
-        // A build loaded from a checkpoint without spans writes them into scratch.
-        let mut scratch = Vec::new();
-        let spans = if self.spans.len() == dims.1 * dims.2 {
-            &mut self.spans[rows]
-        } else {
-            scratch.resize(rows.len(), [0, 0]);
-            &mut scratch[..]
-        };
-        refine_to_faces(
+        let (ny, nxy) = (dims.1, dims.0 * dims.1);
+        let mut owned = refine_to_faces(
             &mut self.dist[z.start * nxy..z.end * nxy],
             &self.nearest,
-            &mut owner[z.start * nxy..z.end * nxy],
-            spans,
-            [self.dirt.dist.as_deref(), self.dirt.owner.as_deref()],
+            &mut self.spans[z.start * ny..z.end * ny],
+            self.dirt.dist.as_deref(),
             z.start * nxy,
             &self.faces,
             dims,
-            spec.cell,
-            self.band * spec.cell,
+            (spec.cell, self.band * spec.cell),
+            &self.owners,
         );
+        write_owners(&mut self.nearest, 0, &std::mem::take(&mut self.pending));
+        if z.end < dims.2 {
+            let last = owned.last_mut().expect("a part has layers");
+            let held = last.partition_point(|&[i, _]| (i as usize) < (z.end - 1) * nxy);
+            self.pending = last.split_off(held);
+        }
+        let pool = &*self.owners;
+        self.nearest[z.start * nxy..z.end * nxy]
+            .par_chunks_mut(nxy * SLAB_LAYERS)
+            .zip(owned)
+            .enumerate()
+            .for_each(|(slab, (near, owned))| {
+                write_owners(near, (z.start + slab * SLAB_LAYERS) * nxy, &owned);
+                pool.give(owned);
+            });
     }
 
-    /// The field (after every part ran); the splat's buffer goes back to `builder`.
+    /// The field (after every part ran); `builder` lends it a spare buffer for its cells.
     pub fn finish(self, builder: &mut FieldBuilder) -> DistanceField {
         let rows = self.spec.len() / self.spec.dims.x as usize;
         let spans: Option<Spans> =
-            (self.owner.is_some() && self.spans.len() == rows).then(|| self.spans.into());
-        let nearest = match self.owner {
-            Some(owner) => {
-                // The splat reached exactly the band cells, so it too is far off the spans.
-                builder.spare.push(Recycled {
-                    buf: self.nearest,
-                    clean: DistanceField::FAR,
-                    spans: spans.clone(),
-                });
-                owner
-            }
-            None => self.nearest,
-        };
+            (self.refine && self.spans.len() == rows).then(|| self.spans.into());
         DistanceField {
             spec: self.spec,
             band: self.band,
             dist: self.dist,
-            nearest,
+            nearest: self.nearest,
             points: Arc::new(self.points),
             faces: self.world_faces.map(Arc::new),
             inside: self.inside.map(Arc::new),
@@ -378,41 +383,51 @@ impl FieldBuild {
 }
 
 /// The refinement pass: per band cell, the exact distance to the best owning triangle among
-/// its nearest point's and its six neighbours' nearest points'. Writes the new `nearest`
-/// in `owner` (the point whose triangle won; ties to the smaller index) and writes world
-/// distances. `dist` and `owner` are the layers starting at cell `offset`, cleaned first
-/// (far) where `dirt` says their old values may be, `spans` their rows' band spans (written).
+/// its nearest point's and its six neighbours' nearest points'. Writes world distances into
+/// `dist` (the layers starting at cell `offset`, cleaned first to `far` where `dist_dirt`
+/// says old values may be) and the rows' band `spans`, and gives per slab of
+/// [`SLAB_LAYERS`] its band cells in index order with their owners (the point whose
+/// triangle won; ties to the smaller index).
 #[allow(clippy::too_many_arguments)]
 fn refine_to_faces(
     dist: &mut [f32],
     nearest: &[u32],
-    owner: &mut [u32],
     spans: &mut [[u32; 2]],
-    [dist_dirt, owner_dirt]: [Option<&[[u32; 2]]>; 2],
+    dist_dirt: Option<&[[u32; 2]]>,
     offset: usize,
     faces: &[[Vec3; 3]],
     (nx, ny, nz): (usize, usize, usize),
-    cell: f32,
-    far: f32,
-) {
+    (cell, far): (f32, f32),
+    pool: &Pool<Vec<Owned>>,
+) -> Vec<Vec<Owned>> {
     let nxy = nx * ny;
     let grid = Neighbours::new(nearest, (nx, ny, nz));
     dist.par_chunks_mut(nxy * SLAB_LAYERS)
-        .zip(owner.par_chunks_mut(nxy * SLAB_LAYERS))
         .zip(spans.par_chunks_mut(ny * SLAB_LAYERS))
         .enumerate()
-        .for_each(|(slab, ((dist, owner), row_spans))| {
+        .map(|(slab, (dist, row_spans))| {
             let base = offset + slab * nxy * SLAB_LAYERS;
             clean(dist, far, dist_dirt, base / nx, nx);
-            clean(owner, DistanceField::FAR, owner_dirt, base / nx, nx);
+            let mut owners = pool.take(Vec::new);
+            owners.clear();
             let slab = RefineSlab {
                 grid: &grid,
                 faces,
                 base,
                 cell,
             };
-            slab.run(dist, owner, row_spans);
-        });
+            slab.run(dist, &mut owners, row_spans);
+            owners
+        })
+        .collect()
+}
+
+/// Writes the `owned` cells' owners over their nearest points in `near` (the grid's cells
+/// from index `base` on).
+fn write_owners(near: &mut [u32], base: usize, owned: &[Owned]) {
+    for &[i, owner] in owned {
+        near[i as usize - base] = owner;
+    }
 }
 
 /// One slab's refinement: its layers' cells from grid index `base` on.
@@ -424,27 +439,32 @@ struct RefineSlab<'a> {
 }
 
 impl RefineSlab<'_> {
-    /// Refines the slab's band cells into `dist` and `owner` (its layers) and writes its rows'
-    /// band spans, compiled for AVX2 where the CPU has it (decided once per process): the
+    /// Refines the slab's band cells into `dist` (its layers) and `owners` (in index order)
+    /// and writes its rows' band spans, compiled for AVX2 where the CPU has it (decided once per process): the
     /// same operations, so the same bits, with the rows' scans and the candidates' selects
     /// eight lanes to an instruction.
-    fn run(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
+    fn run(&self, dist: &mut [f32], owners: &mut Vec<Owned>, row_spans: &mut [[u32; 2]]) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2 (checked just above).
-            return unsafe { self.run_avx2(dist, owner, row_spans) };
+            return unsafe { self.run_avx2(dist, owners, row_spans) };
         }
-        self.run_lanes(dist, owner, row_spans)
+        self.run_lanes(dist, owners, row_spans)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn run_avx2(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
-        self.run_lanes(dist, owner, row_spans)
+    unsafe fn run_avx2(
+        &self,
+        dist: &mut [f32],
+        owners: &mut Vec<Owned>,
+        row_spans: &mut [[u32; 2]],
+    ) {
+        self.run_lanes(dist, owners, row_spans)
     }
 
     #[inline(always)]
-    fn run_lanes(&self, dist: &mut [f32], owner: &mut [u32], row_spans: &mut [[u32; 2]]) {
+    fn run_lanes(&self, dist: &mut [f32], owners: &mut Vec<Owned>, row_spans: &mut [[u32; 2]]) {
         let (grid, base) = (self.grid, self.base);
         let (nx, ny, _) = grid.dims;
         let nxy = nx * ny;
@@ -464,23 +484,24 @@ impl RefineSlab<'_> {
                 let k = row + x;
                 let n = nearest[base + k];
                 if n != DistanceField::FAR && grid.add(&mut group, base + k, [x, y, z], n) {
-                    self.flush(&mut group, dist, owner);
+                    self.flush(&mut group, dist, owners);
                 }
             }
         }
         if group.len > 0 {
-            self.flush(&mut group, dist, owner);
+            self.flush(&mut group, dist, owners);
         }
     }
 
-    /// A group's best squared distances to world distances, in place.
+    /// A group's best squared distances to world distances, in place, and its owners.
     #[inline(always)]
-    fn flush(&self, group: &mut Group, dist: &mut [f32], owner: &mut [u32]) {
+    fn flush(&self, group: &mut Group, dist: &mut [f32], owners: &mut Vec<Owned>) {
         let (d2, n) = self.grid.best_faces(group, self.faces);
-        for l in 0..group.len {
-            let k = group.cells.index[l] - self.base;
-            (dist[k], owner[k]) = (d2[l].sqrt() * self.cell, n[l]);
+        let cells = &group.cells.index[..group.len];
+        for (&i, d2) in cells.iter().zip(d2) {
+            dist[i - self.base] = d2.sqrt() * self.cell;
         }
+        owners.extend(cells.iter().zip(n).map(|(&i, n)| [i as u32, n]));
         group.len = 0;
     }
 }
@@ -862,7 +883,7 @@ mod tests {
         build.splat(0..nz);
         let splatted = build.nearest.clone();
         build.refine(0..nz);
-        let owner = build.owner.as_ref().unwrap();
+        let owner = &build.nearest;
         let far = 3.0 * spec.cell;
         let (mut band, mut on_faces) = (0, [0; 3]);
         for (i, &n0) in splatted.iter().enumerate() {
@@ -911,5 +932,26 @@ mod tests {
             on_faces.iter().all(|&k| k > 0),
             "band cells on the grid's faces: {on_faces:?}"
         );
+    }
+
+    /// A build in any number of parts is the build in one, also where parts are thinner than
+    /// a slab or empty: each part's first layer reads the layer before it as splatted, not
+    /// refined (the refined owners of a part's last layer wait for the next part).
+    #[test]
+    fn any_number_of_parts_builds_the_same_field() {
+        let mesh = torus(0.5, 0.2, 48, 16);
+        let spec = GridSpec::fit(&mesh.bounds(), 37, 0.05).unwrap();
+        let boundary = crate::voxel::voxelize_cpu(&mesh, &spec, BoundaryVariant::Closest).unwrap();
+        let whole = build_field_cpu(&boundary, 3.0).unwrap();
+        let nz = spec.dims.z;
+        for parts in [2, 3, 5, 9, nz - 1, nz, nz + 4] {
+            let mut builder = FieldBuilder::default();
+            builder.recycle(build_field_cpu(&boundary, 2.0).unwrap());
+            let mut build = builder.start(&boundary, 3.0).unwrap();
+            (0..parts).for_each(|p| build.run_part(p, parts));
+            let f = build.finish(&mut builder);
+            assert!(f.nearest == whole.nearest, "{parts} parts");
+            assert!(f.dist == whole.dist, "{parts} parts");
+        }
     }
 }
