@@ -650,12 +650,18 @@ impl AxisGrid {
         let side = (CELL_PER_EXTENT * extent).max(fine);
         let n = [0, 1].map(|a| ((size[a] / side).ceil() as usize).clamp(1, MAX_SIDE));
         let cell = size / DVec2::new(n[0] as f64, n[1] as f64);
-        // `as` truncates, which is the floor for c >= 0 (and 0 below, as the clamp would be).
+        // Clamped to the grid, then truncated, which is the floor for c >= 0 (`max` takes NaN
+        // to 0).
+        let last = [(n[0] - 1) as f64, (n[1] - 1) as f64];
         let cell_of = |g: DVec2| {
-            [
-                (g.x.max(0.0) as usize).min(n[0] - 1),
-                (g.y.max(0.0) as usize).min(n[1] - 1),
-            ]
+            // SAFETY: in [0, n − 1], which a usize holds: the plain conversion, which
+            // saturates, was ten instructions a coordinate.
+            unsafe {
+                [
+                    g.x.max(0.0).min(last[0]).to_int_unchecked::<usize>(),
+                    g.y.max(0.0).min(last[1]).to_int_unchecked::<usize>(),
+                ]
+            }
         };
         // Per triangle, the first and last cell its box meets.
         let spans: Vec<[[usize; 2]; 2]> = boxes
@@ -709,7 +715,15 @@ impl AxisGrid {
         if !(c.x >= 0.0 && c.y >= 0.0 && c.x < n.x && c.y < n.y) {
             return None;
         }
-        Some((c.y as usize).min(self.n[1] - 1) * self.n[0] + (c.x as usize).min(self.n[0] - 1))
+        // SAFETY: in [0, n + 1) (tested just above), which a usize holds: the plain
+        // conversion, which saturates, was ten instructions a coordinate.
+        let (x, y) = unsafe {
+            (
+                c.x.to_int_unchecked::<usize>(),
+                c.y.to_int_unchecked::<usize>(),
+            )
+        };
+        Some(y.min(self.n[1] - 1) * self.n[0] + x.min(self.n[0] - 1))
     }
 
     /// Calls `visit` with the axis coordinate of each place where the line through `p` along
