@@ -563,12 +563,18 @@ struct Tri2 {
 }
 
 impl Tri2 {
-    /// `t` as the ray along `AXIS` sees it (projected on `uv`); `None` when it is parallel
-    /// to the ray (never crossed). Arrays written out: `array::map` was a call per corner
-    /// here, a tenth of the inside test's build.
+    const ZERO: Self = Tri2 {
+        p: [Vec2::ZERO; 3],
+        w: [0.0; 3],
+    };
+
+    /// `t` as the ray along `AXIS` sees it (projected on the next two axes); `None` when it
+    /// is parallel to the ray (never crossed). Arrays written out: `array::map` was a call
+    /// per corner here, a tenth of the inside test's build.
     #[inline(always)]
-    fn facing<const AXIS: usize>(t: &[Vec3; 3], uv: [usize; 2]) -> Option<Self> {
-        let at = |v: Vec3| Vec2::new(v[uv[0]], v[uv[1]]);
+    fn facing<const AXIS: usize>(t: &[Vec3; 3]) -> Option<Self> {
+        let (u, v) = ((AXIS + 1) % 3, (AXIS + 2) % 3);
+        let at = |p: Vec3| Vec2::new(p[u], p[v]);
         let mut p = [at(t[0]), at(t[1]), at(t[2])];
         let mut w = [t[0][AXIS], t[1][AXIS], t[2][AXIS]];
         let d = [p[0].as_dvec2(), p[1].as_dvec2(), p[2].as_dvec2()];
@@ -626,7 +632,7 @@ impl AxisGrid {
         let proj = |v: Vec3| DVec2::new(v[uv[0]] as f64, v[uv[1]] as f64);
         // Sized up front: collected, the filter's unknown length grew it by copies.
         let mut kept: Vec<Tri2> = Vec::with_capacity(tris.len());
-        kept.extend(tris.iter().filter_map(|t| Tri2::facing::<AXIS>(t, uv)));
+        kept.extend(tris.iter().filter_map(Tri2::facing::<AXIS>));
         let boxes: Vec<(Vec2, Vec2)> = kept.iter().map(Tri2::bounds).collect();
         let min = if bounds.is_empty() {
             DVec2::ZERO
@@ -685,7 +691,8 @@ impl AxisGrid {
         // (scattered writes, which do not hold up the loop as scattered reads would).
         let rank = by_first_cell(&spans, n);
         let mut sorted = vec![(Block::EMPTY_BOX, [[0; 2]; 2]); kept.len()];
-        let mut tris2 = kept.clone();
+        // Zeroed, not a clone of `kept`: every entry is written below.
+        let mut tris2 = vec![Tri2::ZERO; kept.len()];
         for (t, &r) in rank.iter().enumerate() {
             sorted[r as usize] = (boxes[t], spans[t]);
             tris2[r as usize] = kept[t];
@@ -703,11 +710,25 @@ impl AxisGrid {
         }
     }
 
+    /// `p` projected along the axis (an array read: indexing a `Vec3` by a run-time axis is
+    /// a branch per coordinate).
+    #[inline]
+    fn project(&self, p: Vec3) -> Vec2 {
+        let a = p.to_array();
+        Vec2::new(a[self.uv[0]], a[self.uv[1]])
+    }
+
     /// The cell whose list holds the triangles the line through `p` can cross; `None`
     /// beyond the box (no triangle there).
     #[inline]
     fn cell_of(&self, p: Vec3) -> Option<usize> {
-        let c = grid(self.min, self.cell, Vec2::new(p[self.uv[0]], p[self.uv[1]]));
+        self.cell_at(self.project(p))
+    }
+
+    /// [`AxisGrid::cell_of`] for the projection `r` of the point.
+    #[inline]
+    fn cell_at(&self, r: Vec2) -> Option<usize> {
+        let c = grid(self.min, self.cell, r);
         // On the box's far side (the cell's floor is n): the last cell, as the binning clamps.
         // (`as` below truncates, the floor for c >= 0; `floor` itself is a library call on
         // x86-64 without SSE4.1.)
@@ -733,9 +754,9 @@ impl AxisGrid {
     /// (the premise of the binning, taken down from cells to single boxes).
     #[inline]
     fn each_hit(&self, p: Vec3, mut visit: impl FnMut(f64) -> bool) -> Option<bool> {
-        let r = Vec2::new(p[self.uv[0]], p[self.uv[1]]);
+        let r = self.project(p);
         let q = r.as_dvec2();
-        let cell = self.cell_of(p)?;
+        let cell = self.cell_at(r)?;
         let list = &self.blocks[self.starts[cell] as usize..self.starts[cell + 1] as usize];
         // The boxes' masks a chunk of blocks at a time, then the crossings of the triangles of
         // the set bits, four at a time, visited in list order.
