@@ -147,6 +147,22 @@ impl GridSpec {
             n.saturating_mul(bytes_per_cell),
         )
     }
+
+    /// Refuses a grid whose cell indices do not fit 32 bits: surface cells and the field's
+    /// refinement keep them as `u32` (half the memory of `usize`).
+    pub fn check_cell_indices(&self, what: &str) -> Result<()> {
+        if self.dims.x as u64 * self.dims.y as u64 * self.dims.z as u64 > u32::MAX as u64 {
+            return Err(Error::Invalid(format!(
+                "{what}: a {}x{}x{} grid has more than {} cells, the most it can index; \
+                 lower the resolution",
+                self.dims.x,
+                self.dims.y,
+                self.dims.z,
+                u32::MAX
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// A dense 3D array over a [`GridSpec`].
@@ -196,5 +212,16 @@ mod tests {
         let e = GridSpec::new(Vec3::ZERO, 1.0, UVec3::splat(100_000)).unwrap_err();
         assert!(matches!(e, Error::TooLarge { .. }), "{e}");
         assert!(e.to_string().contains("100000x100000x100000"));
+    }
+
+    /// 2048 × 2048 × 1024 cells is 2^32, one past what a `u32` indexes; one layer fewer fits.
+    #[test]
+    fn grids_past_32_bit_cell_indices_are_refused() {
+        let big = GridSpec::new(Vec3::ZERO, 1.0, UVec3::new(2048, 2048, 1024)).unwrap();
+        let e = big.check_cell_indices("voxelisation").unwrap_err();
+        assert!(matches!(e, Error::Invalid(_)), "{e}");
+        assert!(e.to_string().contains("2048x2048x1024"), "{e}");
+        let fits = GridSpec::new(Vec3::ZERO, 1.0, UVec3::new(2048, 2048, 1023)).unwrap();
+        assert!(fits.check_cell_indices("voxelisation").is_ok());
     }
 }

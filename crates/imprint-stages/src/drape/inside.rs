@@ -730,8 +730,8 @@ impl AxisGrid {
     fn cell_at(&self, r: Vec2) -> Option<usize> {
         let c = grid(self.min, self.cell, r);
         // On the box's far side (the cell's floor is n): the last cell, as the binning clamps.
-        // (`as` below truncates, the floor for c >= 0; `floor` itself is a library call on
-        // x86-64 without SSE4.1.)
+        // (The conversion below truncates, the floor for c >= 0; `floor` itself is a library
+        // call on x86-64 without SSE4.1.)
         let n = DVec2::new(self.n[0] as f64, self.n[1] as f64) + 1.0;
         if !(c.x >= 0.0 && c.y >= 0.0 && c.x < n.x && c.y < n.y) {
             return None;

@@ -118,6 +118,7 @@ impl FieldBuilder {
     pub fn start(&mut self, boundary: &Boundary, band: f32) -> Result<FieldBuild> {
         validate_band(band)?;
         let spec = boundary.spec;
+        spec.check_cell_indices("distance field")?;
         spec.check_memory("distance field", 8)?;
         let nxy = spec.dims.x as usize * spec.dims.y as usize;
         let pts: Vec<Vec3> = boundary
@@ -366,9 +367,8 @@ impl FieldBuild {
 
     /// The field (after every part ran); `builder` lends it a spare buffer for its cells.
     pub fn finish(self, builder: &mut FieldBuilder) -> DistanceField {
-        let rows = self.spec.len() / self.spec.dims.x as usize;
-        let spans: Option<Spans> =
-            (self.refine && self.spans.len() == rows).then(|| self.spans.into());
+        // Refined builds found every row's span (point-distance builds keep none).
+        let spans: Option<Spans> = self.refine.then(|| self.spans.into());
         DistanceField {
             spec: self.spec,
             band: self.band,
@@ -440,9 +440,9 @@ struct RefineSlab<'a> {
 
 impl RefineSlab<'_> {
     /// Refines the slab's band cells into `dist` (its layers) and `owners` (in index order)
-    /// and writes its rows' band spans, compiled for AVX2 where the CPU has it (decided once per process): the
-    /// same operations, so the same bits, with the rows' scans and the candidates' selects
-    /// eight lanes to an instruction.
+    /// and writes its rows' band spans, compiled for AVX2 where the CPU has it (decided once
+    /// per process): the same operations, so the same bits, with the rows' scans and the
+    /// candidates' selects eight lanes to an instruction.
     fn run(&self, dist: &mut [f32], owners: &mut Vec<Owned>, row_spans: &mut [[u32; 2]]) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
@@ -953,5 +953,37 @@ mod tests {
             assert!(f.nearest == whole.nearest, "{parts} parts");
             assert!(f.dist == whole.dist, "{parts} parts");
         }
+    }
+
+    /// A grid whose cell indices overflow 32 bits is refused with the grid named, before
+    /// anything grid-sized is allocated, by the voxeliser and by the field.
+    #[test]
+    fn grids_past_32_bit_indices_are_refused() {
+        let spec = GridSpec::new(Vec3::ZERO, 0.01, glam::UVec3::new(2048, 2048, 1024)).unwrap();
+        let e = crate::voxel::cpu::Voxelizer::new(spec)
+            .err()
+            .expect("refused");
+        assert!(
+            e.to_string()
+                .contains("voxelisation: a 2048x2048x1024 grid"),
+            "{e}"
+        );
+        let boundary = Boundary {
+            spec,
+            variant: BoundaryVariant::Closest,
+            cells: Vec::new(),
+            points: Vec::new(),
+            faces: Vec::new(),
+            inside: None,
+        };
+        let e = FieldBuilder::default()
+            .start(&boundary, 3.0)
+            .err()
+            .expect("refused");
+        assert!(
+            e.to_string()
+                .contains("distance field: a 2048x2048x1024 grid"),
+            "{e}"
+        );
     }
 }

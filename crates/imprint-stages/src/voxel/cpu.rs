@@ -74,6 +74,7 @@ impl Voxelizer {
     pub fn new(spec: GridSpec) -> Result<Self> {
         // Grid-sized: only the inside bits (the slab scratch is a few slabs' worth).
         spec.check_memory("voxelisation inside bits", 1)?;
+        spec.check_cell_indices("voxelisation")?;
         Ok(Voxelizer {
             spec,
             pool: Pool::default(),
