@@ -580,32 +580,35 @@ impl<'a> Neighbours<'a> {
             c.cands.iter_mut().for_each(|cands| cands[l] = cands[0]);
         }
         let mut best = ([f32::INFINITY; LANES], [u32::MAX; LANES]);
-        keep_better(&mut best, &mut group.pairs, faces, &c.own);
+        best = keep_better(best, &mut group.pairs, faces, &c.own);
         for cands in &c.cands {
-            keep_better(&mut best, &mut group.pairs, faces, cands);
+            best = keep_better(best, &mut group.pairs, faces, cands);
         }
         best
     }
 }
 
-/// Keeps in `best`, per lane, the nearer of its triangle and the lane's triangle of `cands`
-/// (ties to the smaller index), by selects, not branches: which candidate wins is a coin
-/// toss to the predictor.
+/// Per lane, the nearer of `best`'s triangle and the lane's triangle of `cands` (ties to
+/// the smaller index), by selects, not branches: which candidate wins is a coin toss to the
+/// predictor. Into fresh arrays: selected into `best` in place, the lanes compiled to
+/// masked stores, which on AMD processors take many cycles each.
 #[inline(always)]
 fn keep_better(
-    best: &mut (Lanes, [u32; LANES]),
+    best: (Lanes, [u32; LANES]),
     pairs: &mut Pairs,
     faces: &[[Vec3; 3]],
     cands: &[u32; LANES],
-) {
+) -> (Lanes, [u32; LANES]) {
     pairs.set_triangles(faces, cands);
     let d2 = pairs.closest().d2;
+    let mut out = ([0.0f32; LANES], [0u32; LANES]);
     for l in 0..LANES {
         let (d, o, n) = (best.0[l], best.1[l], cands[l]);
         let better = (d2[l] < d) | ((d2[l] == d) & (n < o));
-        best.0[l] = if better { d2[l] } else { d };
-        best.1[l] = if better { n } else { o };
+        out.0[l] = if better { d2[l] } else { d };
+        out.1[l] = if better { n } else { o };
     }
+    out
 }
 
 /// What [`splat_slab`] needs of a slab of layers `z0..z1` and the band.
