@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 
 /// First bytes of a checkpoint file (its format version is the last number).
-const MAGIC: &[u8] = b"imprint checkpoint 5\n";
+const MAGIC: &[u8] = b"imprint checkpoint 6\n";
 
 /// An executor's state between two frames.
 #[derive(Serialize, Deserialize)]

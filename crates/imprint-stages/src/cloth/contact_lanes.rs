@@ -16,7 +16,7 @@
 //! [`contact::respond`]: super::contact::respond
 
 use super::contact;
-use super::lanes::{LANES, lane_vec};
+use super::lanes::{LANES, lane_vec, mask, select};
 use super::sampler::{Corners, FieldView};
 use glam::Vec3;
 
@@ -40,9 +40,9 @@ pub struct Touch {
 pub struct Touched {
     /// The new positions (unchanged where there was no hit).
     pub x: [Lanes; 3],
-    /// The new memory (w = 1), where `remember` is set.
-    pub side: [Lanes; 3],
-    pub remember: [bool; LANES],
+    /// The new memory: the outward direction read and w = 1 where a live lane had a sample,
+    /// else the old.
+    pub side: [Lanes; 4],
     /// Pushed out to ε; of those, found inside; and how deep (ε − signed distance).
     pub hit: [bool; LANES],
     pub inside: [bool; LANES],
@@ -107,36 +107,53 @@ fn touch_lanes(
     else {
         return Touched {
             x: t.x,
+            side: t.side,
             ..Default::default()
         };
     };
-    let mut out = Touched::default();
+    // Every lane pushed, then each lane's new position and memory selected in a loop of
+    // their own ([`select`]): selected in this loop, they compiled to masked stores, which
+    // on AMD processors take many cycles.
+    let (mut pushed, mut read) = ([0u32; LANES], [0u32; LANES]);
+    let mut moved = [[0.0f32; LANES]; 3];
+    let (mut hit, mut depth) = ([false; LANES], [0.0f32; LANES]);
+    let (mut inside, mut band_miss) = ([false; LANES], [false; LANES]);
     for m in 0..LANES {
         // `respond`: the memory, then a push to ε along the outward direction normalised
         // (`try_normalize`: none unless 1 / length is a positive finite number), friction.
         let (o, d) = (each(|k| outward[k][m]), distance[m]);
         let valid = t.live[m] & some[m];
         let rcp: f32 = 1.0 / length(o);
-        let hit = valid & (d < eps) & rcp.is_finite() & (rcp > 0.0);
+        hit[m] = valid & (d < eps) & rcp.is_finite() & (rcp > 0.0);
         let n = each(|k| o[k] * rcp);
-        let push = eps - d;
-        let mut x = each(|k| t.x[k][m] + push * n[k]);
+        depth[m] = eps - d;
+        let mut x = each(|k| t.x[k][m] + depth[m] * n[k]);
         if friction > 0.0 {
             let q = each(|k| x[k] - t.from[k][m]);
             let along = q[0] * n[0] + q[1] * n[1] + q[2] * n[2];
             x = each(|k| x[k] - friction * (q[k] - along * n[k]));
         }
-        for k in 0..3 {
-            out.x[k][m] = if hit { x[k] } else { t.x[k][m] };
-            out.side[k][m] = o[k];
-        }
-        out.remember[m] = valid;
-        out.hit[m] = hit;
-        out.inside[m] = hit & (d < 0.0);
-        out.band_miss[m] = hit & miss[m];
-        out.depth[m] = push;
+        (pushed[m], read[m]) = (mask(hit[m]), mask(valid));
+        (0..3).for_each(|k| moved[k][m] = x[k]);
+        inside[m] = hit[m] & (d < 0.0);
+        band_miss[m] = hit[m] & miss[m];
     }
-    out
+    let (mut x_out, mut side) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 4]);
+    for m in 0..LANES {
+        for k in 0..3 {
+            x_out[k][m] = select(pushed[m], moved[k][m], t.x[k][m]);
+            side[k][m] = select(read[m], outward[k][m], t.side[k][m]);
+        }
+        side[3][m] = select(read[m], 1.0, t.side[3][m]);
+    }
+    Touched {
+        x: x_out,
+        side,
+        hit,
+        inside,
+        depth,
+        band_miss,
+    }
 }
 
 /// The lanes' samples read as signed ([`super::contact::signed_sample`]'s bits): whether
@@ -475,11 +492,11 @@ mod tests {
                 .flatten();
             let hit =
                 sample.and_then(|s| contact::respond(&mut y, from, &s, &mut side, eps, friction));
-            assert_eq!(lanes.remember[m], sample.is_some(), "{x}");
-            if lanes.remember[m] {
-                let got = Vec3::new(lanes.side[0][m], lanes.side[1][m], lanes.side[2][m]);
-                assert_eq!(bits(got), bits(side.truncate()), "{x}");
-            }
+            let got = Vec4::from_array(lanes.side.map(|a| a[m]));
+            assert_eq!(
+                got.to_array().map(f32::to_bits),
+                side.to_array().map(f32::to_bits)
+            );
             assert_eq!(lanes.hit[m], hit.is_some(), "{x}");
             let got = Vec3::new(lanes.x[0][m], lanes.x[1][m], lanes.x[2][m]);
             assert_eq!(bits(got), bits(y), "{x}");

@@ -18,6 +18,7 @@ use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::{Corners, FieldView};
 use super::shape::ClothShape;
+use super::side::{SideLanes, SideMemory};
 use super::springs::{
     Faces, Hinges, LinkQuad, Links, SpringLaw, enumerate_springs, hinge_angle_gradient,
     hinge_energy, hinge_slope, spring_constants,
@@ -200,9 +201,9 @@ pub struct ClothSim {
     /// work on the lanes).
     state: ClothState,
     /// The side memory at the frame's start, restored when the frame fails.
-    backup_side: Vec<Vec4>,
+    backup_side: SideMemory,
     /// Per particle and collider: outward direction at the last sample (see `contact`).
-    side: Vec<Vec4>,
+    side: SideMemory,
     side_fields: usize,
     /// Per block of [`LANES`] particles and collider, the cells its end and start fields
     /// were last read at (kept through a frame's substeps, whose fields do not change).
@@ -320,8 +321,8 @@ impl ClothSim {
                 prev: pos.clone(),
                 pos,
             },
-            side: vec![Vec4::ZERO; n],
-            backup_side: Vec::new(),
+            side: SideMemory::new(n, 0),
+            backup_side: SideMemory::default(),
             side_fields: 0,
             corners: Vec::new(),
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
@@ -397,9 +398,10 @@ impl ClothSim {
     }
 
     /// The contacts' side memory (per particle, one entry per collider of the last frame,
-    /// at least one) and the number of colliders it is laid out for (0 before any frame).
-    pub fn side_memory(&self) -> (&[Vec4], usize) {
-        (&self.side, self.side_fields)
+    /// at least one, particle-major) and the number of colliders it is laid out for (0
+    /// before any frame).
+    pub fn side_memory(&self) -> (Vec<Vec4>, usize) {
+        (self.side.to_vec4s(self.len()), self.side_fields)
     }
 
     /// The last substep's length, s (None before the first frame): the next substep scales
@@ -450,7 +452,7 @@ impl ClothSim {
             self.pin_from[k] = positions[p as usize];
             self.pin_to[k] = positions[p as usize];
         }
-        self.side.fill(Vec4::ZERO);
+        self.side.clear();
         self.first_energy = None;
         self.gpu_kinetic = None;
         Ok(())
@@ -547,7 +549,7 @@ impl ClothSim {
         }
         let nf = bodies.len();
         if nf != self.side_fields {
-            self.side = vec![Vec4::ZERO; self.len() * nf.max(1)];
+            self.side = SideMemory::new(self.len(), nf);
             self.side_fields = nf;
         }
         let colliders: Vec<Collider> = bodies
@@ -717,7 +719,7 @@ impl ClothSim {
             .par_chunks_mut(CHUNK)
             .zip(out.y.par_chunks_mut(CHUNK))
             .zip(out.z.par_chunks_mut(CHUNK))
-            .zip(self.side.par_chunks_mut(CHUNK * nf))
+            .zip(self.side.runs_mut(CHUNK / LANES))
             .zip(self.corners.par_chunks_mut(CHUNK / LANES * nf))
             .zip(self.stats.par_iter_mut())
             .enumerate()
@@ -791,12 +793,11 @@ impl ClothSim {
     /// one at a time where not.
     fn residual_contact(&self, range: std::ops::Range<usize>, colliders: &[Collider]) -> Vec<f32> {
         let (pos, eps) = (&self.state.pos, self.params.collision.epsilon);
-        let nf = colliders.len().max(1);
         let mut worst = vec![f32::NEG_INFINITY; range.len()];
         for (k, c) in colliders.iter().enumerate() {
             if c.end.is_signed() || c.start.is_some_and(|f| f.is_signed()) {
                 for (i, worst) in range.clone().zip(&mut worst) {
-                    let (x, side) = (pos[i].truncate(), self.side[i * nf + k]);
+                    let (x, side) = (pos[i].truncate(), self.side.get(i, k));
                     if let Some(s) = contact::signed_sample(c, x, x, 1.0, side, eps) {
                         *worst = worst.max(eps - s.distance);
                     }
@@ -811,18 +812,15 @@ impl ClothSim {
             };
             for (b, worst) in range.clone().step_by(LANES).zip(worst.chunks_mut(LANES)) {
                 // Lanes past the range repeat its first particle (their answers unused).
-                let (mut x, mut side) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 4]);
+                let mut x = [[0.0f32; LANES]; 3];
+                // A lane indexes the positions by axis and picks the particle.
+                #[allow(clippy::needless_range_loop)]
                 for m in 0..LANES {
                     let i = if m < worst.len() { b + m } else { b };
-                    let mem = self.side[i * nf + k];
-                    for a in 0..4 {
-                        side[a][m] = mem[a];
-                    }
-                    for a in 0..3 {
-                        x[a][m] = pos[i][a];
-                    }
+                    (0..3).for_each(|a| x[a][m] = pos[i][a]);
                 }
-                let found = contact_lanes::resting(fields, &x, &side, eps, &mut corners);
+                let side = self.side.block(b / LANES, k);
+                let found = contact_lanes::resting(fields, &x, side, eps, &mut corners);
                 for (worst, d) in worst.iter_mut().zip(found) {
                     if let Some(d) = d {
                         *worst = worst.max(eps - d);
@@ -1001,16 +999,18 @@ impl ClothSim {
         gpu: &GpuClothFrameMetrics,
     ) -> Result<SubstepStats> {
         let n = self.len();
-        if state.pos.len() != n || state.prev.len() != n || side.len() != n * nf.max(1) {
-            return Err(Error::Invalid(format!(
-                "cloth: a GPU state of {} particles and {} side entries for {n} particles and \
-                 {nf} colliders",
-                state.pos.len(),
-                side.len()
-            )));
-        }
+        let blocks = SideMemory::from_vec4s(&side, n, nf)
+            .filter(|_| state.pos.len() == n && state.prev.len() == n)
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "cloth: a GPU state of {} particles and {} side entries for {n} particles \
+                     and {nf} colliders",
+                    state.pos.len(),
+                    side.len()
+                ))
+            })?;
         self.state = state;
-        self.side = side;
+        self.side = blocks;
         self.side_fields = nf;
         self.dt_prev = Some(gpu.dt_substep);
         // What else the GPU cloth carries into its next frame: the pins start from their
@@ -1044,10 +1044,10 @@ impl ClothSim {
     }
 }
 
-/// What a chunk of particles keeps between substeps: per particle and collider its side
-/// memory, per block and collider the cells last read ([`Corners`]).
+/// What a chunk of particles keeps between substeps: per block and collider its side
+/// memory ([`SideMemory`]) and the cells last read ([`Corners`]).
 struct Memory<'a> {
-    side: &'a mut [Vec4],
+    side: &'a mut [SideLanes],
     corners: &'a mut [[Corners; 2]],
 }
 
@@ -1166,17 +1166,18 @@ fn step_block(
         if !collider.end.is_signed() && collider.start.is_none_or(|f| !f.is_signed()) {
             touch_block(ctx, collider, &x, &mut xn, &live, memory, k0, c, st);
         } else {
+            let side = &mut memory.side[k0 / LANES * ctx.nf() + c];
             for m in (0..count).filter(|&m| live[m]) {
-                let mem = &mut memory.side[(k0 + m) * ctx.nf() + c];
+                let mut mem = Vec4::from_array(side.map(|a| a[m]));
                 let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
-                if let Some(sample) =
-                    contact::signed_sample(collider, p, from, ctx.s, *mem, ctx.eps)
+                if let Some(sample) = contact::signed_sample(collider, p, from, ctx.s, mem, ctx.eps)
                     && let Some(hit) =
-                        contact::respond(&mut p, from, &sample, mem, ctx.eps, ctx.friction)
+                        contact::respond(&mut p, from, &sample, &mut mem, ctx.eps, ctx.friction)
                 {
                     record(st, hit);
                     st.band_misses += sample.band_miss as u32;
                 }
+                (0..4).for_each(|a| side[a][m] = mem[a]);
                 (0..3).for_each(|k| xn[k][m] = p[k]);
             }
         }
@@ -1315,18 +1316,13 @@ fn touch_block(
     st: &mut SubstepStats,
 ) {
     let nf = ctx.nf();
-    let mut t = Touch {
+    let side = &mut memory.side[k0 / LANES * nf + c];
+    let t = Touch {
         x: *x,
         from: *from,
+        side: *side,
         live: *live,
-        ..Default::default()
     };
-    for m in (0..LANES).filter(|&m| live[m]) {
-        let mem = memory.side[(k0 + m) * nf + c];
-        for a in 0..4 {
-            t.side[a][m] = mem[a];
-        }
-    }
     let w = collider.weight(ctx.s);
     let fields = Fields {
         end: &collider.end,
@@ -1336,21 +1332,14 @@ fn touch_block(
     let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction, corners);
     // The positions are the old where there was no hit.
     *x = r.x;
-    // A lane indexes the results and the chunk's memories alike.
-    #[allow(clippy::needless_range_loop)]
-    for m in 0..LANES {
-        if r.remember[m] {
-            memory.side[(k0 + m) * nf + c] =
-                Vec4::new(r.side[0][m], r.side[1][m], r.side[2][m], 1.0);
-        }
-        if r.hit[m] {
-            let hit = Hit {
-                depth: r.depth[m],
-                inside: r.inside[m],
-            };
-            record(st, hit);
-            st.band_misses += r.band_miss[m] as u32;
-        }
+    *side = r.side;
+    for m in (0..LANES).filter(|&m| r.hit[m]) {
+        let hit = Hit {
+            depth: r.depth[m],
+            inside: r.inside[m],
+        };
+        record(st, hit);
+        st.band_misses += r.band_miss[m] as u32;
     }
 }
 

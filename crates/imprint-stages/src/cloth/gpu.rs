@@ -382,7 +382,7 @@ impl GpuCloth {
                 ctx.zeroed_buffer("cloth backup pos", bytes)?,
                 ctx.zeroed_buffer("cloth backup prev", bytes)?,
             ],
-            side: ctx.storage_buffer("cloth side", side)?,
+            side: ctx.storage_buffer("cloth side", &side)?,
             side_backup: ctx.zeroed_buffer("cloth side backup", side.len() as u64 * 16)?,
             side_fields,
             stats: ctx.zeroed_buffer(

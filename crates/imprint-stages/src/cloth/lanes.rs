@@ -38,6 +38,14 @@ pub fn mask(b: bool) -> u32 {
     if b { u32::MAX } else { 0 }
 }
 
+/// `a` where lane mask `m` is all ones, else `b`, by the bits: a select the compiler keeps
+/// as one (an `if` into an array in memory can become a masked store, which on AMD
+/// processors takes many cycles).
+#[inline(always)]
+pub fn select(m: u32, a: f32, b: f32) -> f32 {
+    f32::from_bits((a.to_bits() & m) | (b.to_bits() & !m))
+}
+
 /// One bit per lane of a lane mask (bit `m` set where lane `m`'s mask is all ones), from
 /// the masks' top bits (in the AVX2 build: a shift per lane and an OR across them, no branch).
 #[inline(always)]

@@ -47,6 +47,7 @@ pub mod metrics;
 pub mod params;
 pub mod sampler;
 pub mod shape;
+pub mod side;
 pub mod springs;
 pub mod stability;
 pub mod stress;

@@ -177,13 +177,17 @@ impl<'a> FieldView<'a> {
         }
         // In the band: the vector's length or the bound (`finish`); at its edge: the blend of
         // distances.
+        // Into a new array: selecting in place compiled to a masked store, which on AMD
+        // processors takes many cycles.
         let cell = self.field.spec.cell;
+        let mut distance = [0.0f32; LANES];
         for m in 0..LANES {
             let len = (v[0][m] * v[0][m] + v[1][m] * v[1][m] + v[2][m] * v[2][m]).sqrt();
             let t = Vec3::new(t[0][m], t[1][m], t[2][m]);
             let inside = vector_distance(len, dist[m], cell, t);
-            dist[m] = if far[m] != 0 { dist[m] } else { inside };
+            distance[m] = if far[m] != 0 { dist[m] } else { inside };
         }
+        let mut dist = distance;
         let mut in_band = [false; LANES];
         for m in 0..LANES {
             in_band[m] = far[m] == 0;
@@ -242,20 +246,25 @@ impl<'a> FieldView<'a> {
             b: [[0.0; LANES]; 3],
             i: [[0; LANES]; 3],
             t: [[0.0; LANES]; 3],
-            inner: [u32::MAX; LANES],
+            inner: [0; LANES],
         };
+        // Per axis, then combined: `inner &= mask` in the loop below compiled to a masked
+        // store, which on AMD processors takes many cycles.
+        let mut inside = [[0u32; LANES]; 3];
         for a in 0..3 {
             for m in 0..LANES {
                 let x = (p[a][m] - origin[a]) / cell;
                 let b = x.floor();
                 c.b[a][m] = b;
                 c.t[a][m] = x - b;
-                let inside = (b >= 0.0) & (b + 1.0 < dims[a]);
-                c.inner[m] &= mask(inside);
+                inside[a][m] = mask((b >= 0.0) & (b + 1.0 < dims[a]));
                 // SAFETY: clamped to [0, dims − 1] (NaN to 0 by `max`), which an i32 holds:
                 // the plain conversion, which saturates, is one scalar call per lane.
                 c.i[a][m] = unsafe { b.max(0.0).min(dims[a] - 1.0).to_int_unchecked::<i32>() };
             }
+        }
+        for m in 0..LANES {
+            c.inner[m] = inside[0][m] & inside[1][m] & inside[2][m];
         }
         c
     }
