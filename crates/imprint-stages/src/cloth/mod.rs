@@ -12,7 +12,8 @@
 //!   friction (H eq. 11-12), which side of an unsigned field a particle is on, and the fields
 //!   blended in time (H §5.3); [`sampler`]: reading a field fast, with the field's numbers;
 //!   [`contact_lanes`]: the contact with a body read from unsigned fields eight particles
-//!   at a time, same bits;
+//!   at a time, same bits; [`side`]: each particle's memory of which side of a body it is
+//!   on, kept by blocks of eight;
 //! - [`gpu`]: the same simulator on the GPU, [`gpu::GpuCloth`], one dispatch per substep;
 //! - [`stability`]: the largest stable substep, predicted before running, and the stress
 //!   map that checks it; [`metrics`]: what each frame reports.
