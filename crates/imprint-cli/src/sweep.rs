@@ -453,7 +453,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
 }
 
 impl Setup {
-    /// Options of setting `i`'s run: its writers into DIR/runs/<id>/.
+    /// Options of setting `i`'s run: its writers into `DIR/runs/<id>/`.
     fn opts_for(&self, args: &SweepArgs, i: usize) -> RunOptions {
         self.opts(args.out.join("runs").join(&self.ids()[i]))
     }

@@ -24,7 +24,7 @@
 //! centres at a time, and its depth plane, and is kept per band it touches as a compact
 //! record; a larger one is kept set up and drawn row by row in each band it touches. Each
 //! band then draws its records chunk after chunk, so in mesh order. Within a band a
-//! triangle's depth is interpolated from its first row in the band (see [`BAND_ROWS`]).
+//! triangle's depth is interpolated from its first row in the band (see `BAND_ROWS`).
 
 use crate::camera::{Camera, Frame};
 use crate::geom::barycentric;

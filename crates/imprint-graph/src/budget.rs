@@ -144,7 +144,7 @@ struct Model<'a> {
 }
 
 /// Greedy: while the prediction is over the target, steps the field with the largest
-/// per-frame cost that can still step ([`step`]); stops when met or none can.
+/// per-frame cost that can still step (`step`); stops when met or none can.
 /// `target_fps` must be > 0.
 pub fn choose(plan: &Plan, measured: &Measured, target_fps: f64) -> Budget {
     let target_ms = 1e3 / target_fps;

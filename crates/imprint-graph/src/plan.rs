@@ -38,7 +38,7 @@ pub struct Plan {
 /// parsed value ([`crate::overrides::apply`]: its errors name the `--set` argument), and the
 /// nodes are checked. A check that fails only because of an override says so, naming it,
 /// rather than pointing at the file's text, which does not hold the value. The plan's
-/// [`Source`] text describes what runs (see [`described`]).
+/// [`Source`] text describes what runs (see `described`).
 pub fn load(path: &Path, overrides: &[String]) -> Result<Plan> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         imprint_core::Error::Invalid(format!("cannot read pipeline file {}: {e}", path.display()))

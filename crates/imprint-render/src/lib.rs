@@ -4,7 +4,7 @@
 //! - [`field_io`]: a distance field as `_dist.npy`, `_vec.npy` and a `_field.json`;
 //! - [`colormap`]: viridis (sequential) and RdBu (diverging) colour tables;
 //! - [`text`]: labels on pictures, drawn by ab_glyph in the DejaVu Sans shipped in `assets/fonts/`;
-//! - [`slice`]: a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
+//! - [`slice`](mod@slice): a PNG of one grid plane of a distance field, with a legend (H Fig. 1/4);
 //! - [`frame`]: the CPU frame renderer (meshes, field slices, sun + ambient, ground grid,
 //!   wireframe, supersampling);
 //! - [`gpu_frame`]: the same frames on the GPU ([`gpu_frame::GpuRenderer`]), checked against

@@ -88,7 +88,7 @@ pub fn text_width(text: &str, scale: u32) -> u32 {
 }
 
 /// Draws `text` with the top of its capitals at `y`, starting at `x`, anti-aliased: each pixel
-/// moves towards `color` by the glyph's coverage of it (darkened, see [`DARKEN`]). Pixels outside the image are clipped,
+/// moves towards `color` by the glyph's coverage of it (darkened, see `DARKEN`). Pixels outside the image are clipped,
 /// so labels near an edge never panic.
 pub fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: u32, color: Rgb<u8>) {
     let (w, h) = (img.width() as i64, img.height() as i64);

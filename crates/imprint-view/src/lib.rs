@@ -1,8 +1,8 @@
 //! `imprint view`: a pipeline run live in a window. The executor is stepped from the window's
 //! frame loop ([`session`]); the 3D view is drawn by the same GPU renderer as the `Render`
 //! node, from its camera, so a frame on screen is the frame `imprint run` writes
-//! ([`display`]); a panel (egui) shows each node's time, backend and metrics, and plays,
-//! scrubs, hides objects, moves field slices and edits numbers ([`panel`]). The pipeline file
+//! (`display`); a panel (egui) shows each node's time, backend and metrics, and plays,
+//! scrubs, hides objects, moves field slices and edits numbers (`panel`). The pipeline file
 //! and its assets are watched ([`watch`]): a save reloads the plan keeping the state of every
 //! node that did not change; a broken save is shown while the last good plan runs on. With a
 //! target frame rate, the schedule of the expensive nodes is chosen to hold it

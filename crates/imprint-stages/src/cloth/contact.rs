@@ -16,7 +16,7 @@
 //! - vector against that outward direction → outside, signed distance +d;
 //! - vector along it, and the surface within reach (the particle's own step this substep,
 //!   plus 2ε for the body's, plus how far the body moved there between the two fields when
-//!   blending, [`moved`]) → it crossed the surface: inside, signed distance -d.
+//!   blending, `moved`) → it crossed the surface: inside, signed distance -d.
 //!
 //! When blending, a crossing in one field where the other finds the particle outside must
 //! also be one the surface could make: outside by d there and inside by d' here is a sweep of

@@ -1,5 +1,5 @@
 //! Motions as position maps. Each motion is compiled once against the rest bounding box,
-//! then evaluated per frame into a [`Deform`]: a few scalars that a pure per-vertex function
+//! then evaluated per frame into a `Deform`: a few scalars that a pure per-vertex function
 //! applies, so results are the same whatever the thread count.
 
 use super::params::{Axis, Motion, RigidKey};

@@ -356,8 +356,8 @@ pub enum Motion {
         #[schemars(with = "f32")]
         period: Option<f32>,
     },
-    /// Travelling wave: p[displace] += amplitude sin(2π (p[direction] - speed t) / wavelength),
-    /// with p[direction] the world coordinate.
+    /// Travelling wave: `p[displace] += amplitude sin(2π (p[direction] - speed t) / wavelength)`,
+    /// with `p[direction]` the world coordinate.
     Wave {
         /// Largest displacement, m.
         amplitude: f32,
