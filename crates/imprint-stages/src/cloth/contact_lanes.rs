@@ -115,7 +115,7 @@ fn touch_lanes(
     // their own ([`select`]): selected in this loop, they compiled to masked stores, which
     // on AMD processors take many cycles.
     let (mut pushed, mut read) = ([0u32; LANES], [0u32; LANES]);
-    let mut moved = [[0.0f32; LANES]; 3];
+    let mut x_pushed = [[0.0f32; LANES]; 3];
     let (mut hit, mut depth) = ([false; LANES], [0.0f32; LANES]);
     let (mut inside, mut band_miss) = ([false; LANES], [false; LANES]);
     for m in 0..LANES {
@@ -134,14 +134,14 @@ fn touch_lanes(
             x = each(|k| x[k] - friction * (q[k] - along * n[k]));
         }
         (pushed[m], read[m]) = (mask(hit[m]), mask(valid));
-        (0..3).for_each(|k| moved[k][m] = x[k]);
+        (0..3).for_each(|k| x_pushed[k][m] = x[k]);
         inside[m] = hit[m] & (d < 0.0);
         band_miss[m] = hit[m] & miss[m];
     }
     let (mut x_out, mut side) = ([[0.0f32; LANES]; 3], [[0.0f32; LANES]; 4]);
     for m in 0..LANES {
         for k in 0..3 {
-            x_out[k][m] = select(pushed[m], moved[k][m], t.x[k][m]);
+            x_out[k][m] = select(pushed[m], x_pushed[k][m], t.x[k][m]);
             side[k][m] = select(read[m], outward[k][m], t.side[k][m]);
         }
         side[3][m] = select(read[m], 1.0, t.side[3][m]);

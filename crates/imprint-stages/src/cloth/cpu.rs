@@ -204,7 +204,6 @@ pub struct ClothSim {
     backup_side: SideMemory,
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: SideMemory,
-    side_fields: usize,
     /// Per block of [`LANES`] particles and collider, the cells its end and start fields
     /// were last read at (kept through a frame's substeps, whose fields do not change).
     #[serde(skip)]
@@ -323,7 +322,6 @@ impl ClothSim {
             },
             side: SideMemory::new(n, 0),
             backup_side: SideMemory::default(),
-            side_fields: 0,
             corners: Vec::new(),
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
             dt_prev: None,
@@ -401,7 +399,7 @@ impl ClothSim {
     /// at least one, particle-major) and the number of colliders it is laid out for (0
     /// before any frame).
     pub fn side_memory(&self) -> (Vec<Vec4>, usize) {
-        (self.side.to_vec4s(self.len()), self.side_fields)
+        (self.side.to_vec4s(self.len()), self.side.colliders())
     }
 
     /// The last substep's length, s (None before the first frame): the next substep scales
@@ -548,9 +546,8 @@ impl ClothSim {
             )));
         }
         let nf = bodies.len();
-        if nf != self.side_fields {
+        if nf != self.side.colliders() {
             self.side = SideMemory::new(self.len(), nf);
-            self.side_fields = nf;
         }
         let colliders: Vec<Collider> = bodies
             .iter()
@@ -1011,7 +1008,6 @@ impl ClothSim {
             })?;
         self.state = state;
         self.side = blocks;
-        self.side_fields = nf;
         self.dt_prev = Some(gpu.dt_substep);
         // What else the GPU cloth carries into its next frame: the pins start from their
         // targets, and the energy limit rests on the last substep's kinetic energy.

@@ -176,9 +176,8 @@ impl<'a> FieldView<'a> {
             }
         }
         // In the band: the vector's length or the bound (`finish`); at its edge: the blend of
-        // distances.
-        // Into a new array: selecting in place compiled to a masked store, which on AMD
-        // processors takes many cycles.
+        // distances. Into a new array: selected in place, it compiled to a masked store, which
+        // on AMD processors takes many cycles.
         let cell = self.field.spec.cell;
         let mut distance = [0.0f32; LANES];
         for m in 0..LANES {

@@ -17,8 +17,8 @@ pub type SideLanes = [Lane; 4];
 /// The side memory of `n` particles and `colliders` colliders (at least one entry each).
 #[derive(Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SideMemory {
-    /// Entries per particle: the colliders, at least one.
-    per_particle: usize,
+    /// The colliders it is laid out for (0 before any frame, which keeps one entry).
+    colliders: usize,
     /// Block b's memory of collider c is `blocks[b * per_particle + c]`; lanes past the
     /// last particle stay zero.
     blocks: Vec<SideLanes>,
@@ -27,14 +27,14 @@ pub struct SideMemory {
 impl Clone for SideMemory {
     fn clone(&self) -> Self {
         SideMemory {
-            per_particle: self.per_particle,
+            colliders: self.colliders,
             blocks: self.blocks.clone(),
         }
     }
 
     /// Keeps the allocation (a frame saves the memory into a backup every time).
     fn clone_from(&mut self, source: &Self) {
-        self.per_particle = source.per_particle;
+        self.colliders = source.colliders;
         self.blocks.clone_from(&source.blocks);
     }
 }
@@ -42,10 +42,9 @@ impl Clone for SideMemory {
 impl SideMemory {
     /// Nothing known, for `n` particles and `colliders` colliders.
     pub fn new(n: usize, colliders: usize) -> Self {
-        let per_particle = colliders.max(1);
         SideMemory {
-            per_particle,
-            blocks: vec![[[0.0; LANES]; 4]; n.div_ceil(LANES) * per_particle],
+            colliders,
+            blocks: vec![[[0.0; LANES]; 4]; n.div_ceil(LANES) * colliders.max(1)],
         }
     }
 
@@ -53,10 +52,10 @@ impl SideMemory {
     /// `None` unless `side` holds `n × colliders.max(1)` of them.
     pub fn from_vec4s(side: &[Vec4], n: usize, colliders: usize) -> Option<Self> {
         let mut out = Self::new(n, colliders);
-        if side.len() != n * out.per_particle {
+        if side.len() != n * out.per_particle() {
             return None;
         }
-        for (i, entries) in side.chunks_exact(out.per_particle).enumerate() {
+        for (i, entries) in side.chunks_exact(out.per_particle()).enumerate() {
             for (c, &v) in entries.iter().enumerate() {
                 out.set(i, c, v);
             }
@@ -67,7 +66,7 @@ impl SideMemory {
     /// One `Vec4` per particle (of the first `n`) and collider, particle-major.
     pub fn to_vec4s(&self, n: usize) -> Vec<Vec4> {
         (0..n)
-            .flat_map(|i| (0..self.per_particle).map(move |c| self.get(i, c)))
+            .flat_map(|i| (0..self.per_particle()).map(move |c| self.get(i, c)))
             .collect()
     }
 
@@ -79,17 +78,15 @@ impl SideMemory {
     /// Particle `i`'s memory of collider `c`.
     #[inline(always)]
     pub fn get(&self, i: usize, c: usize) -> Vec4 {
-        let (b, m) = (&self.blocks[i / LANES * self.per_particle + c], i % LANES);
+        let (b, m) = (&self.blocks[i / LANES * self.per_particle() + c], i % LANES);
         Vec4::new(b[0][m], b[1][m], b[2][m], b[3][m])
     }
 
     /// Sets particle `i`'s memory of collider `c`.
     #[inline(always)]
     pub fn set(&mut self, i: usize, c: usize, v: Vec4) {
-        let (b, m) = (
-            &mut self.blocks[i / LANES * self.per_particle + c],
-            i % LANES,
-        );
+        let at = i / LANES * self.per_particle() + c;
+        let (b, m) = (&mut self.blocks[at], i % LANES);
         for (a, v) in v.to_array().into_iter().enumerate() {
             b[a][m] = v;
         }
@@ -98,19 +95,25 @@ impl SideMemory {
     /// Block `b`'s memory of collider `c`.
     #[inline(always)]
     pub fn block(&self, b: usize, c: usize) -> &SideLanes {
-        &self.blocks[b * self.per_particle + c]
+        &self.blocks[b * self.per_particle() + c]
     }
 
     /// The blocks, in runs of `blocks` blocks (each with all its colliders) for parallel
     /// chunks of particles: `blocks × LANES` particles a run.
     pub fn runs_mut(&mut self, blocks: usize) -> rayon::slice::ChunksMut<'_, SideLanes> {
         use rayon::prelude::*;
-        self.blocks.par_chunks_mut(blocks * self.per_particle)
+        let run = blocks * self.per_particle();
+        self.blocks.par_chunks_mut(run)
     }
 
     /// Entries per particle (the colliders, at least one).
     pub fn per_particle(&self) -> usize {
-        self.per_particle
+        self.colliders.max(1)
+    }
+
+    /// The colliders it is laid out for (0 before any frame).
+    pub fn colliders(&self) -> usize {
+        self.colliders
     }
 }
 
@@ -156,7 +159,8 @@ mod tests {
     #[test]
     fn layout_counts() {
         let side = SideMemory::new(9, 0);
-        assert_eq!((side.per_particle(), side.to_vec4s(9).len()), (1, 9));
+        assert_eq!((side.colliders(), side.per_particle()), (0, 1));
+        assert_eq!(side.to_vec4s(9).len(), 9);
         assert!(SideMemory::from_vec4s(&[Vec4::ONE; 17], 9, 2).is_none());
         assert!(SideMemory::from_vec4s(&[Vec4::ONE; 18], 9, 2).is_some());
     }
