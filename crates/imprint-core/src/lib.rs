@@ -12,12 +12,14 @@
 //! - [`gltf`]: glTF 2.0 input: the skinned mesh, its skin and clips, and posing them by
 //!   linear blend skinning;
 //! - [`field`]: the discrete boundary and distance-field resources;
+//! - [`cache`]: prefetch hints for loops that gather from scattered addresses;
 //! - [`pool`]: scratch buffers the tasks of a parallel pass take and give back;
 //! - [`io`]: atomic file writing (nothing half-written under a final name);
 //! - [`error`]: the error type and what each kind means as an exit code.
 
 pub mod buckets;
 pub mod bvh;
+pub mod cache;
 pub mod camera;
 pub mod closest;
 pub mod error;

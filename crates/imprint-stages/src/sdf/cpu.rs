@@ -20,6 +20,7 @@
 //! scatter of results. Both give the scalar code's bits, so the field is the same.
 
 use glam::Vec3;
+use imprint_core::cache::prefetch;
 use imprint_core::closest::{LANES, Pairs};
 use imprint_core::field::{LazyCells, SpareCells, band_span};
 use imprint_core::geom::{ceil_i, floor_i};
@@ -475,6 +476,11 @@ impl RefineSlab<'_> {
         for (r, span) in row_spans.iter_mut().enumerate() {
             let row = r * nx;
             let (y, z) = (r % ny, base / nxy + r / ny);
+            // The row above in z, a layer ahead of the rows read so far: its cells are the
+            // +z neighbours' reads, which missed the cache on most rows.
+            if let Some(above) = nearest.get(base + row + nxy..base + row + nxy + nx) {
+                above.iter().step_by(16).for_each(prefetch);
+            }
             let Some(xs) = band_span(&nearest[base + row..base + row + nx]) else {
                 *span = [0, 0];
                 continue;

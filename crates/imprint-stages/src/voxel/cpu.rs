@@ -17,6 +17,7 @@
 use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
 use imprint_core::buckets::Buckets;
+use imprint_core::cache::prefetch;
 use imprint_core::closest::Batch;
 use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
 use imprint_core::pool::Pool;
@@ -111,15 +112,7 @@ impl Voxelizer {
             .map(|slab| {
                 let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
                 let mut scratch = pool.take(|| SlabScratch::new(nxy));
-                let best = &mut scratch.best[..z.len() * nxy];
-                propose_slab(
-                    &scene,
-                    bins.of(slab),
-                    z.clone(),
-                    best,
-                    &mut scratch.occupied,
-                );
-                let part = collect_slab(&scene, z.start * nxy, best, &mut scratch.occupied);
+                let part = slab_task(&scene, bins.of(slab), z, &mut scratch);
                 pool.give(scratch);
                 part
             })
@@ -206,8 +199,52 @@ impl SlabBins {
     }
 }
 
+/// One slab's surface cells ([`propose_slab`], then [`collect_slab`]) with the slab's clean
+/// scratch, compiled for AVX2 where the CPU has it (decided once per process): the same
+/// operations, so the same bits, with fewer instructions for the scalar bookkeeping around
+/// the closest points (VEX's three-operand forms spare the register copies).
+fn slab_task(
+    scene: &Scene,
+    tris: &[u32],
+    z: std::ops::Range<usize>,
+    scratch: &mut SlabScratch,
+) -> BoundaryPart {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { slab_task_avx2(scene, tris, z, scratch) };
+    }
+    slab_task_any(scene, tris, z, scratch)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn slab_task_avx2(
+    scene: &Scene,
+    tris: &[u32],
+    z: std::ops::Range<usize>,
+    scratch: &mut SlabScratch,
+) -> BoundaryPart {
+    slab_task_any(scene, tris, z, scratch)
+}
+
+#[inline(always)]
+fn slab_task_any(
+    scene: &Scene,
+    tris: &[u32],
+    z: std::ops::Range<usize>,
+    scratch: &mut SlabScratch,
+) -> BoundaryPart {
+    let nxy = scene.spec.dims.x as usize * scene.spec.dims.y as usize;
+    let best = &mut scratch.best[..z.len() * nxy];
+    let base = z.start * nxy;
+    propose_slab(scene, tris, z, best, &mut scratch.occupied);
+    collect_slab(scene, base, best, &mut scratch.occupied)
+}
+
 /// Pass 1 of a slab of layers `z`: every (triangle, candidate cell) pair in it proposes its
 /// key; `best` and `occupied` are the slab's.
+#[inline(always)]
 fn propose_slab(
     scene: &Scene,
     tris: &[u32],
@@ -221,11 +258,11 @@ fn propose_slab(
     let nx = spec.dims.x as usize;
     let nxy = nx * spec.dims.y as usize;
     let base = z.start * nxy;
-    let lo_bound = IVec3::new(0, 0, z.start as i32);
-    let hi_bound = IVec3::new(
-        spec.dims.x as i32 - 1,
-        spec.dims.y as i32 - 1,
-        z.end as i32 - 1,
+    let lo_bound = Vec3::new(0.0, 0.0, z.start as f32);
+    let hi_bound = Vec3::new(
+        (spec.dims.x - 1) as f32,
+        (spec.dims.y - 1) as f32,
+        (z.end - 1) as f32,
     );
     // (cell, triangle) pairs past the plane test, their closest points a batch at a time;
     // the proposals do not depend on the order.
@@ -256,21 +293,45 @@ fn propose_slab(
         best[local] = key;
         occupied[local / 64] |= 1u64 << (local % 64);
     };
-    for &ti in tris {
+    for (k, &ti) in tris.iter().enumerate() {
+        // A triangle's indices sixteen triangles ahead, its corners six ahead (their indices
+        // are in cache by then): a slab's triangles are scattered over the mesh.
+        if let Some(&t) = tris.get(k + 16) {
+            prefetch(&mesh.triangles[t as usize]);
+        }
+        if let Some(&t) = tris.get(k + 6) {
+            for i in mesh.triangles[t as usize] {
+                prefetch(&verts[i as usize]);
+            }
+        }
         let [a, b, c] = mesh.triangles[ti as usize].map(|i| verts[i as usize]);
         let (mn, mx) = (a.min(b).min(c) - CELL_HALF, a.max(b).max(c) + CELL_HALF);
-        let lo = IVec3::new(ceil_i(mn.x), ceil_i(mn.y), ceil_i(mn.z)).max(lo_bound);
-        let hi = IVec3::new(floor_i(mx.x), floor_i(mx.y), floor_i(mx.z)).min(hi_bound);
+        // Rounded and clamped as floats, then converted: with AVX2 `ceil` and `floor` are an
+        // instruction each, and the clamps leave a small integer (one past the slab's cells
+        // where the triangle misses them: an empty range, as integer clamps gave), so the
+        // cast needs none of the saturating cast's fix-ups (14 instructions a value).
+        let cells = |v: Vec3| {
+            // SAFETY: `max` gives the bound for a NaN, so each value is a finite integer in
+            // -1 ..= the grid's size.
+            v.to_array().map(|c| unsafe { c.to_int_unchecked::<i32>() })
+        };
+        let lo = IVec3::from(cells(mn.ceil().clamp(lo_bound, hi_bound + 1.0)));
+        let hi = IVec3::from(cells(mx.floor().clamp(lo_bound - 1.0, hi_bound)));
         // The triangle's plane is a separating axis: one dot product rejects the candidate
         // cells it misses before any closest-point work (exact, like the rest).
         let n = (b - a).cross(c - a);
+        // `n.dot(centre - a)` term by term, the y and z terms once per row and layer (the
+        // same products and sums in the same order, so the same bits). Exclusive ranges:
+        // `..=` keeps an extra flag per step, and these loops run one to three times.
         let reach = CELL_HALF * (n.x.abs() + n.y.abs() + n.z.abs());
-        for z in lo.z..=hi.z {
-            for y in lo.y..=hi.y {
-                for x in lo.x..=hi.x {
+        for z in lo.z..hi.z + 1 {
+            let tz = n.z * (z as f32 - a.z);
+            for y in lo.y..hi.y + 1 {
+                let ty = n.y * (y as f32 - a.y);
+                for x in lo.x..hi.x + 1 {
                     let at = IVec3::new(x, y, z);
                     let centre = at.as_vec3();
-                    if n.dot(centre - a).abs() > reach {
+                    if ((n.x * (centre.x - a.x) + ty) + tz).abs() > reach {
                         continue;
                     }
                     if batch.push(centre, [a, b, c], (at, ti)) {
@@ -285,6 +346,7 @@ fn propose_slab(
 
 /// Pass 2 of a slab whose first cell is `base`: its surface cells in increasing index, with
 /// their points and triangles; resets what pass 1 touched.
+#[inline(always)]
 fn collect_slab(
     scene: &Scene,
     base: usize,
