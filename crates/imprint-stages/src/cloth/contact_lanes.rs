@@ -16,7 +16,7 @@
 //! [`contact::respond`]: super::contact::respond
 
 use super::contact;
-use super::lanes::{LANES, lane_vec, mask, select};
+use super::lanes::{LANES, bool_bits, lane_vec, lanes_of, mask, select};
 use super::sampler::{Corners, FieldView};
 use glam::Vec3;
 
@@ -246,7 +246,7 @@ fn turned_motion(
         turned[1][m] = known & ib[m] & (along(vb, m) > 0.0);
     }
     let mut motion = [[0.0; LANES]; 2];
-    for m in (0..LANES).filter(|&m| turned[0][m] | turned[1][m]) {
+    for m in lanes_of(bool_bits(&turned[0]) | bool_bits(&turned[1])) {
         let x = Vec3::new(t.x[0][m], t.x[1][m], t.x[2][m]);
         let (a, b) = (lane_vec(va, m), lane_vec(vb, m));
         let jump = if ia[m] & ib[m] {

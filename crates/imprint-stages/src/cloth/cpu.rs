@@ -13,7 +13,9 @@
 
 use super::contact::{self, Collider, Hit};
 use super::contact_lanes::{self, Fields, Touch};
-use super::lanes::{Blocks, LANES, Lane, Lanes, lane_vec};
+use super::lanes::{
+    Blocks, LANES, Lane, Lanes, bool_bits, lane_bits, lane_vec, lanes_of, mask, select,
+};
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
 use super::sampler::{Corners, FieldView};
@@ -1110,6 +1112,7 @@ fn step_block(
     let count = ctx.n.saturating_sub(first).min(LANES);
     // Lanes that move freely: not pinned, not padding.
     let live: [bool; LANES] = ctx.free[first..first + LANES].try_into().expect("a block");
+    let live_bits = bool_bits(&live);
     let block = |a: &[f32]| -> Lane { a[first..first + LANES].try_into().expect("a block") };
     let x = [block(&ctx.at.x), block(&ctx.at.y), block(&ctx.at.z)];
     let xp = [block(&ctx.prev.x), block(&ctx.prev.y), block(&ctx.prev.z)];
@@ -1133,7 +1136,7 @@ fn step_block(
         }
     }
     if let Some((wind, drag)) = ctx.wind {
-        for m in (0..count).filter(|&m| live[m]) {
+        for m in lanes_of(live_bits) {
             let n = ctx.faces.area_normal_by(first + m, |j| ctx.at.get(j));
             let rel = wind - Vec3::new(moved[0][m], moved[1][m], moved[2][m]) / ctx.dt;
             let push = drag * n.normalize_or_zero().dot(rel) * n;
@@ -1151,7 +1154,8 @@ fn step_block(
     if count < LANES {
         xn.iter_mut().for_each(|xn| xn[count..].fill(0.0));
     }
-    for m in (0..count).filter(|&m| !live[m]) {
+    // The pinned particles (neither live nor padding).
+    for m in lanes_of(!live_bits & ((1u32 << count) - 1)) {
         let slot = ctx.pin_slot[first + m] as usize;
         let (a, b) = (ctx.pin_from[slot], ctx.pin_to[slot]);
         let p = if ctx.s >= 1.0 { b } else { a + (b - a) * ctx.s };
@@ -1163,7 +1167,7 @@ fn step_block(
             touch_block(ctx, collider, &x, &mut xn, &live, memory, k0, c, st);
         } else {
             let side = &mut memory.side[k0 / LANES * ctx.nf() + c];
-            for m in (0..count).filter(|&m| live[m]) {
+            for m in lanes_of(live_bits) {
                 let mut mem = Vec4::from_array(side.map(|a| a[m]));
                 let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
                 if let Some(sample) = contact::signed_sample(collider, p, from, ctx.s, mem, ctx.eps)
@@ -1179,7 +1183,7 @@ fn step_block(
         }
     }
     for collider in ctx.depth {
-        for m in (0..count).filter(|&m| live[m]) {
+        for m in lanes_of(live_bits) {
             let (mut p, from) = (lane_vec(&xn, m), lane_vec(&x, m));
             let reach = 2.0 * ctx.eps + (p - from).length();
             let Some(sample) = collider.sample(p, reach, ctx.s) else {
@@ -1229,7 +1233,7 @@ fn ground_block(
         }
         hits[m] = hit;
     }
-    for m in (0..LANES).filter(|&m| hits[m]) {
+    for m in lanes_of(bool_bits(&hits)) {
         record(
             st,
             Hit {
@@ -1257,7 +1261,8 @@ fn block_stats(
     // lanes go without a branch each.
     let mut step2 = [0.0f32; LANES];
     let mut accel2 = [0.0f32; LANES];
-    let mut finite = [true; LANES];
+    // Lane masks, not `bool`s: the lane loop then vectorises whole.
+    let mut bad = [0u32; LANES];
     for m in 0..LANES {
         let s = [
             x[0][m] - from[0][m],
@@ -1269,9 +1274,12 @@ fn block_stats(
             s[0] * s[0] + s[1] * s[1] + s[2] * s[2],
             d[0] * d[0] + d[1] * d[1] + d[2] * d[2],
         );
-        step2[m] = if live[m] { s2 } else { 0.0 };
-        accel2[m] = if live[m] { a2 } else { 0.0 };
-        finite[m] = x[0][m].is_finite() & x[1][m].is_finite() & x[2][m].is_finite();
+        let live = mask(live[m]);
+        step2[m] = select(live, s2, 0.0);
+        accel2[m] = select(live, a2, 0.0);
+        // All three finite: x − x is +0 for a finite x, NaN for an infinite or NaN one.
+        let finite = (x[0][m] - x[0][m]) + (x[1][m] - x[1][m]) + (x[2][m] - x[2][m]) == 0.0;
+        bad[m] = live & !mask(finite);
     }
     // The kinetic energy's sum in the lanes' order (its bits depend on it); the largest in
     // halves (`max` drops NaNs, so any order gives the same).
@@ -1286,10 +1294,7 @@ fn block_stats(
         half /= 2;
     }
     st.max_accel = st.max_accel.max(accel2[0]);
-    let mut bad = 0u32;
-    for m in 0..LANES {
-        bad |= ((live[m] & !finite[m]) as u32) << m;
-    }
+    let bad = lane_bits(&bad);
     if bad != 0 {
         st.nonfinite = st.nonfinite.min(first as u32 + bad.trailing_zeros());
     }
@@ -1329,7 +1334,7 @@ fn touch_block(
     // The positions are the old where there was no hit.
     *x = r.x;
     *side = r.side;
-    for m in (0..LANES).filter(|&m| r.hit[m]) {
+    for m in lanes_of(bool_bits(&r.hit)) {
         let hit = Hit {
             depth: r.depth[m],
             inside: r.inside[m],

@@ -10,7 +10,7 @@
 //! is computed once though the cloth reads it in two frames (as the end, then the start).
 //! Reads in the grid's outermost half cell or outside it take the field's own code.
 
-use super::lanes::{LANES, lane_bits, mask};
+use super::lanes::{LANES, lane_bits, lanes_of, mask};
 use glam::{IVec3, UVec3, Vec3, Vec3A, Vec4};
 use imprint_core::field::{FarBricks, vector_distance};
 use imprint_core::{DistanceField, FieldSample, Sampling};
@@ -191,7 +191,7 @@ impl<'a> FieldView<'a> {
         for m in 0..LANES {
             in_band[m] = far[m] == 0;
         }
-        for m in (0..LANES).filter(|&m| c.inner[m] == 0) {
+        for m in lanes_of(!lane_bits(&c.inner) & ((1 << LANES) - 1)) {
             let f = self.sample(Vec3::new(p[0][m], p[1][m], p[2][m]));
             (dist[m], in_band[m]) = (f.distance, f.in_band);
             for (a, v) in v.iter_mut().enumerate() {
