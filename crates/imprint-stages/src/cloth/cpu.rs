@@ -1277,9 +1277,8 @@ fn block_stats(
         let live = mask(live[m]);
         step2[m] = select(live, s2, 0.0);
         accel2[m] = select(live, a2, 0.0);
-        // All three finite: x − x is +0 for a finite x, NaN for an infinite or NaN one.
-        let finite = (x[0][m] - x[0][m]) + (x[1][m] - x[1][m]) + (x[2][m] - x[2][m]) == 0.0;
-        bad[m] = live & !mask(finite);
+        let finite = [0, 1, 2].map(|a| mask(x[a][m].is_finite()));
+        bad[m] = live & !(finite[0] & finite[1] & finite[2]);
     }
     // The kinetic energy's sum in the lanes' order (its bits depend on it); the largest in
     // halves (`max` drops NaNs, so any order gives the same).
