@@ -129,12 +129,9 @@ impl<'a> FieldView<'a> {
         for m in 0..LANES {
             need[m] = c.inner[m] & !held[m];
         }
-        let mut load = lane_bits(&need);
         let (nx, nxy) = (self.dims.x as usize, (self.dims.x * self.dims.y) as usize);
         let far = -self.field.far_value();
-        while load != 0 {
-            let m = load.trailing_zeros() as usize;
-            load &= load - 1;
+        for m in lanes_of(lane_bits(&need)) {
             let base = [0, 1, 2].map(|a| c.i[a][m] as usize);
             (0..3).for_each(|a| corners.base[a][m] = c.i[a][m]);
             let i0 = base[0] + nx * base[1] + nxy * base[2];
