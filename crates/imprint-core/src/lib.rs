@@ -12,6 +12,7 @@
 //! - [`gltf`]: glTF 2.0 input: the skinned mesh, its skin and clips, and posing them by
 //!   linear blend skinning;
 //! - [`field`]: the discrete boundary and distance-field resources;
+//! - [`lanes`]: eight values at a time (the lane type, masks, selects, lane bits);
 //! - [`cache`]: prefetch hints for loops that gather from scattered addresses;
 //! - [`pool`]: scratch buffers the tasks of a parallel pass take and give back;
 //! - [`io`]: atomic file writing (nothing half-written under a final name);
@@ -29,6 +30,7 @@ pub mod gltf;
 pub mod grid;
 pub mod heightfield;
 pub mod io;
+pub mod lanes;
 pub mod mesh;
 pub mod mesh_formats;
 pub mod pool;

@@ -19,67 +19,9 @@ use super::springs::{LinkQuad, Links, SpringLaw};
 use glam::Vec3;
 use std::collections::HashMap;
 
-/// Particles per block.
-pub const LANES: usize = 8;
-
-/// One value per particle of a block.
-pub type Lane = [f32; LANES];
-
-/// Lane `m` of a block's vectors, stored by axis.
-#[inline(always)]
-pub fn lane_vec(v: &[Lane; 3], m: usize) -> Vec3 {
-    Vec3::new(v[0][m], v[1][m], v[2][m])
-}
-
-/// A lane mask's value for `b`: all ones or zero. Lane loops over masks vectorise where
-/// loops over `bool`s (bytes) do not.
-#[inline(always)]
-pub fn mask(b: bool) -> u32 {
-    if b { u32::MAX } else { 0 }
-}
-
-/// `a` where lane mask `m` is all ones, else `b`, by the bits: a select the compiler keeps
-/// as one (an `if` into an array in memory can become a masked store, which on AMD
-/// processors takes many cycles).
-#[inline(always)]
-pub fn select(m: u32, a: f32, b: f32) -> f32 {
-    f32::from_bits((a.to_bits() & m) | (b.to_bits() & !m))
-}
-
-/// One bit per lane of a lane mask (bit `m` set where lane `m`'s mask is all ones), from
-/// the masks' top bits (in the AVX2 build: a shift per lane and an OR across them, no branch).
-#[inline(always)]
-pub fn lane_bits(mask: &[u32; LANES]) -> u32 {
-    let mut bits = 0;
-    for (m, &k) in mask.iter().enumerate() {
-        bits |= (k >> 31) << m;
-    }
-    bits
-}
-
-/// One bit per lane (bit `m` set where lane `m` is true).
-#[inline(always)]
-pub fn bool_bits(b: &[bool; LANES]) -> u32 {
-    let mut bits = 0;
-    for (m, &b) in b.iter().enumerate() {
-        bits |= (b as u32) << m;
-    }
-    bits
-}
-
-/// The lanes whose bits are set, in increasing order: for loops over the few lanes that
-/// need scalar work (a hit to record, a pinned particle). As a filter over every lane, each
-/// lane was tested and branched on: about 8% of the substep's instructions.
-#[inline(always)]
-pub fn lanes_of(mut bits: u32) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (bits != 0).then(|| {
-            let m = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            m
-        })
-    })
-}
+pub use imprint_core::lanes::{
+    LANES, Lane, bool_bits, lane_bits, lane_vec, lanes_of, lanewise, mask, select,
+};
 
 /// Lengths below this count as zero when normalising a spring (as in `cpu`).
 const TINY: f32 = 1e-20;
@@ -482,16 +424,6 @@ fn spring_of_lanes<'a>(
         }
     }
     (other, c)
-}
-
-/// `[f(0), .., f(LANES - 1)]`, as a loop the compiler vectorises.
-#[inline(always)]
-fn lanewise(f: impl Fn(usize) -> f32) -> Lane {
-    let mut v = [0.0; LANES];
-    for (m, v) in v.iter_mut().enumerate() {
-        *v = f(m);
-    }
-    v
 }
 
 #[cfg(test)]

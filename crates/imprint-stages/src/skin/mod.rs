@@ -10,6 +10,8 @@
 //! - [`gpu`]: LBS and DQS as a compute dispatch, tested against [`blend`].
 //! - [`fill`]: the adaptive close-packed particle fill.
 //! - [`particles`]: the particle skinning simulation and its vertices.
+//! - `rotation_lanes`, `pair_lanes`: the particles' rotations and volume changes, and the
+//!   pairs' forces, eight particles at a time, the same bits as [`particles`] one at a time.
 //! - [`gpu_particles`]: the same substeps and vertices on the GPU, tested against
 //!   [`particles`].
 //! - [`measure`]: volume, joint cross-section and self-intersection of a skinned mesh.
@@ -21,7 +23,9 @@ pub mod fill;
 pub mod gpu;
 pub mod gpu_particles;
 pub mod measure;
+mod pair_lanes;
 pub mod particles;
 pub mod rig;
+mod rotation_lanes;
 pub mod skeleton;
 pub mod weights;

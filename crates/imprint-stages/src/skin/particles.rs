@@ -78,14 +78,14 @@
 //! those in list order (with the bone's pull, its target carried from the last substep's
 //! end) fused with the update. Per frame O(vertices × 4) for the mesh (plus one rotation
 //! round per particle with [`VertexRotation::Particle`]). Positions, velocities and
-//! rotations are SIMD-aligned (`Vec3A`, `Mat3A`) in the loops. Memory O(particles ×
-//! neighbours). Measured (test `frame_cost_at_5k_particles_and_10k_vertices`) on the 2-core
-//! machine while another build ran (load 2), so upper bounds: 5.2k particles, 10k
-//! vertices: 11–12.5 ms per frame with the defaults (18 substeps; 12.5–16 ms before the
-//! pairs were computed once), 7.5 ms with T's set (24 substeps; 11.6 ms before), vertices
-//! under 1 ms. Not yet the 8 ms goal with the defaults. Fitting the rotations inside the
-//! force pass (one substep late) would save the first pass but made the defaults unstable
-//! at 18 substeps.
+//! rotations are SIMD-aligned (`Vec3A`, `Mat3A`). The first two passes run eight particles
+//! at a time (`rotation_lanes`, `pair_lanes`: AVX2 or AVX-512 where the processor has it,
+//! the same bits as one at a time): on the limb of BENCHMARKS §11 (4,936 particles, 60
+//! frames, one thread, cachegrind) they took the rotations from 2,762 to 894 M
+//! instructions and the pairs from 3,090 to 1,849 M, and the whole run from 7,684 to
+//! 5,305 M. Memory O(particles × neighbours). Fitting the rotations inside the force pass
+//! (one substep late) would save the first pass but made the defaults unstable at 18
+//! substeps.
 //!
 //! **Determinism.** Each pair's force is written once, by its lower end's task, into its own
 //! slot, and each particle gathers its pairs' forces in its neighbour list's order (no
@@ -94,6 +94,8 @@
 //! index: bytes are the same on any thread count.
 
 use super::fill::{Fill, FillParams, FillReport, fill};
+use super::pair_lanes::{Law, PairLanes, State};
+use super::rotation_lanes::{Out, RotationLanes};
 use glam::{Affine3A, Mat3A, Quat, Vec3, Vec3A};
 use imprint_core::{Error, Mesh, Result};
 use rayon::prelude::*;
@@ -102,6 +104,7 @@ use serde::{Deserialize, Serialize};
 
 /// Particles per parallel task: fixed, so the work split never depends on the thread count.
 const CHUNK: usize = 256;
+const _: () = assert!(CHUNK.is_multiple_of(imprint_core::lanes::LANES));
 
 /// How a vertex's rest offset from each of its particles is turned.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -323,6 +326,13 @@ pub struct ParticleSkin {
     /// volume), and the current volume change J.
     rest_inv: Vec<Option<f32>>,
     jac: Vec<f32>,
+    /// The lists again by blocks of eight particles, for the rotations' pass (built from
+    /// the lists above: not in a checkpoint).
+    #[serde(skip)]
+    rot_lanes: RotationLanes,
+    /// The own pairs by blocks of eight particles, for the pairs' pass (the same).
+    #[serde(skip)]
+    pair_lanes: PairLanes,
     bones: usize,
     deviation_limit: f32,
 }
@@ -437,6 +447,9 @@ impl ParticleSkin {
                 (det.abs() > 1e-6 * scale.powi(3)).then_some(det)
             })
             .collect();
+        let rot_lanes = RotationLanes::build(&start, &nbr, &rest_off, &rest_inv);
+        let pair_lanes =
+            PairLanes::build([&start, &upper, &pair_start, &nbr], &rest_off, &rest_len);
         Ok(ParticleSkin {
             node: "skin".into(),
             params: params.clone(),
@@ -465,6 +478,8 @@ impl ParticleSkin {
             rot: vec![Quat::IDENTITY; n],
             rot_new: vec![Quat::IDENTITY; n],
             half_rot: vec![Mat3A::IDENTITY * 0.5; n],
+            rot_lanes,
+            pair_lanes,
             rest_inv,
             jac: vec![1.0; n],
             bones: bones.len(),
@@ -636,38 +651,26 @@ impl ParticleSkin {
     }
 
     /// Pass 0 of a substep: each particle's rotation (one round from the last one) and its
-    /// neighbourhood's volume change J = det(A B⁻¹).
+    /// neighbourhood's volume change J = det(A B⁻¹), eight particles at a time
+    /// (`rotation_lanes`, built here after a checkpoint left it out).
     fn rotations_and_volumes(&mut self, corotated: bool) {
-        let (x, rest, st, nb, rot, binv) = (
-            &self.xa,
-            &self.rest_off,
-            &self.start,
-            &self.nbr,
-            &self.rot,
-            &self.rest_inv,
-        );
+        if !self.rot_lanes.fits(self.xa.len()) {
+            self.rot_lanes =
+                RotationLanes::build(&self.start, &self.nbr, &self.rest_off, &self.rest_inv);
+        }
+        let (lanes, x, rot) = (&self.rot_lanes, &self.xa, &self.rot);
         self.rot_new
             .par_chunks_mut(CHUNK)
             .zip(self.jac.par_chunks_mut(CHUNK))
             .zip(self.half_rot.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(c, ((out, jac), hr))| {
-                for k in 0..out.len() {
-                    let i = c * CHUNK + k;
-                    let r = st[i] as usize..st[i + 1] as usize;
-                    let a = neighbourhood(x, &nb[r.clone()], &rest[r], i);
-                    if corotated {
-                        out[k] = extract_rotation(&a, rot[i], 1);
-                        hr[k] = Mat3A::from_quat(out[k]) * 0.5;
-                    }
-                    // det(A B⁻¹) as det A / det B: exactly 1 at rest; bounded (JAC_RANGE),
-                    // as a neighbourhood nearly flat at rest gives wild ratios from small
-                    // moves.
-                    jac[k] = match binv[i] {
-                        Some(b) => (a.determinant() / b).clamp(JAC_RANGE.0, JAC_RANGE.1),
-                        None => 1.0,
-                    };
-                }
+            .for_each(|(c, ((out_rot, jac), half_rot))| {
+                let out = Out {
+                    rot: out_rot,
+                    half_rot,
+                    jac,
+                };
+                lanes.chunk(c * CHUNK, x, rot, corotated, out);
             });
         if corotated {
             std::mem::swap(&mut self.rot, &mut self.rot_new);
@@ -676,21 +679,28 @@ impl ParticleSkin {
 
     /// Pass 1 of a substep: each pair's force from x_n and the estimated v_n, once, from its
     /// lower end (the pair's term is exactly antisymmetric: negating both offsets negates
-    /// every product, and the pressure's J̄ is summed symmetrically).
+    /// every product, and the pressure's J̄ is summed symmetrically), eight lower ends at a
+    /// time (`pair_lanes`).
     fn pair_forces(&mut self, corotated: bool, kv: f32) {
-        let p = &self.params;
-        let (ks, cs) = (p.stiffness, p.damping);
-        let (hrot, jac) = (&self.half_rot, &self.jac);
-        let (x, ve) = (&self.xa, &self.ve);
-        let (st, nb, rl, ro, up, ps) = (
-            &self.start,
-            &self.nbr,
-            &self.rest_len,
-            &self.rest_off,
-            &self.upper,
-            &self.pair_start,
-        );
-        let n = x.len();
+        if !self.pair_lanes.fits(self.xa.len()) {
+            let lists = [&self.start, &self.upper, &self.pair_start, &self.nbr];
+            self.pair_lanes =
+                PairLanes::build(lists.map(|l| &l[..]), &self.rest_off, &self.rest_len);
+        }
+        let law = Law {
+            ks: self.params.stiffness,
+            cs: self.params.damping,
+            kv,
+            corotated,
+        };
+        let state = State {
+            x: &self.xa,
+            ve: &self.ve,
+            half_rot: &self.half_rot,
+            jac: &self.jac,
+        };
+        let (lanes, ps) = (&self.pair_lanes, &self.pair_start);
+        let n = state.x.len();
         let mut parts = Vec::with_capacity(n.div_ceil(CHUNK));
         let mut tail: &mut [Vec3A] = &mut self.pair_f;
         for lo in (0..n).step_by(CHUNK) {
@@ -699,50 +709,10 @@ impl ParticleSkin {
             parts.push(a);
             tail = b;
         }
-        let hkv = 0.5 * kv;
         parts.into_par_iter().enumerate().for_each(|(c, out)| {
             let lo = c * CHUNK;
-            let mut o = out.iter_mut();
-            for i in lo..(lo + CHUNK).min(n) {
-                let xi = x[i];
-                let vi = ve[i];
-                let edges = up[i] as usize..st[i + 1] as usize;
-                // Pressure: apart when the pair's neighbourhoods shrank (J̄ < 1).
-                let pi = hkv * jac[i];
-                if corotated {
-                    let hri = hrot[i];
-                    let slots = o.by_ref().take(edges.len());
-                    for ((f, &j), &r) in slots.zip(&nb[edges.clone()]).zip(&ro[edges]) {
-                        let j = j as usize;
-                        let dx = x[j] - xi;
-                        let d2 = dx.length_squared();
-                        if d2 <= 0.0 {
-                            *f = Vec3A::ZERO;
-                            continue;
-                        }
-                        let nrm = dx * d2.sqrt().recip();
-                        // ½(R_i + R_j) (X_j − X_i).
-                        let off = (hri + hrot[j]) * r;
-                        let p = (pi + hkv * jac[j]) - kv;
-                        *f = ks * (dx - off) + p * dx + (cs * (ve[j] - vi).dot(nrm)) * nrm;
-                    }
-                } else {
-                    for e in edges {
-                        let f = o.next().expect("pair slot");
-                        let j = nb[e] as usize;
-                        let dx = x[j] - xi;
-                        let d = dx.length();
-                        if d <= 0.0 {
-                            *f = Vec3A::ZERO;
-                            continue;
-                        }
-                        let nrm = dx / d;
-                        let p = (pi + hkv * jac[j]) - kv;
-                        let s = ks * (d - rl[e]) + cs * (ve[j] - vi).dot(nrm);
-                        *f = s * nrm + p * dx;
-                    }
-                }
-            }
+            let at = [lo, CHUNK.min(n - lo), ps[lo] as usize];
+            lanes.chunk(at, state, law, out);
         });
     }
 
@@ -1032,7 +1002,7 @@ fn bone_poses(s0: &[(Quat, Vec3)], s1: &[(Quat, Vec3)], u: f32) -> Vec<Affine3A>
 
 /// Σ_j (x_j − x_i)(X_j − X_i)ᵀ over i's neighbours: its rotation part turns rest offsets
 /// into current ones.
-fn neighbourhood(x: &[Vec3A], nb: &[u32], rest_off: &[Vec3A], i: usize) -> Mat3A {
+pub(super) fn neighbourhood(x: &[Vec3A], nb: &[u32], rest_off: &[Vec3A], i: usize) -> Mat3A {
     let mut a = Mat3A::ZERO;
     for (&j, &r) in nb.iter().zip(rest_off) {
         let d = x[j as usize] - x[i];
@@ -1043,7 +1013,7 @@ fn neighbourhood(x: &[Vec3A], nb: &[u32], rest_off: &[Vec3A], i: usize) -> Mat3A
 
 /// The rotation part of `a` (Müller et al.'s iteration on a quaternion, `rounds` fixed rounds
 /// from `q`): deterministic, and falls back to `q` where `a` carries no rotation.
-fn extract_rotation(a: &Mat3A, mut q: Quat, rounds: u32) -> Quat {
+pub(super) fn extract_rotation(a: &Mat3A, mut q: Quat, rounds: u32) -> Quat {
     for _ in 0..rounds {
         let r = Mat3A::from_quat(q);
         let num = r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
