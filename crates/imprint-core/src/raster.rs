@@ -21,7 +21,9 @@
 //! validation of the mesh). Triangles are then set up in parallel chunks of mesh order. A
 //! small triangle (at most 8 × 8 pixel centres, the common case at depth-map resolutions)
 //! gets its coverage right away, as a bit mask from its edge functions evaluated four pixel
-//! centres at a time, and its depth plane, and is kept per band it touches as a compact
+//! centres at a time (eight, in integers, where the CPU has AVX2: the setup and the drawing
+//! are compiled for it too, with the same bits), and its depth plane, and is kept per band it
+//! touches as a compact
 //! record; a larger one is kept set up and drawn row by row in each band it touches. Each
 //! band then draws its records chunk after chunk, so in mesh order. Within a band a
 //! triangle's depth is interpolated from its first row in the band (see `BAND_ROWS`).
@@ -482,6 +484,42 @@ fn small_coverage(row: [i32; 3], step_x: [i32; 3], step_y: [i32; 3], ni: i32, nj
     mask & (cols * 0x0101_0101_0101_0101) & (u64::MAX >> (64 - 8 * nj))
 }
 
+/// [`small_coverage`] with a row's eight columns in one AVX2 register, in `i32`: inside the
+/// box the values are the same exact integers as there (below 2^24 in magnitude, see
+/// [`SMALL_EXTENT`]), and lanes outside it (at most 8 pixels from its first centre, so
+/// below 2^25) are masked off the same way, so the mask is the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn small_coverage_avx2(row: [i32; 3], step_x: [i32; 3], step_y: [i32; 3], ni: i32, nj: i32) -> u64 {
+    use std::arch::x86_64::*;
+    let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let mut e = [_mm256_setzero_si256(); 3];
+    let mut y = [_mm256_setzero_si256(); 3];
+    for k in 0..3 {
+        let x = _mm256_mullo_epi32(_mm256_set1_epi32(step_x[k]), lanes);
+        e[k] = _mm256_add_epi32(_mm256_set1_epi32(row[k]), x);
+        y[k] = _mm256_set1_epi32(step_y[k]);
+    }
+    // A lane's sign bit is set where some edge function is negative (outside).
+    let outside = |e: &[__m256i; 3]| {
+        let m = _mm256_min_epi32(_mm256_min_epi32(e[0], e[1]), e[2]);
+        _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u64
+    };
+    let mut out = 0u64;
+    // Fixed trip counts (4 or 8 rows), as in `small_coverage`; rows not evaluated are
+    // masked off below.
+    let rows = if nj <= 4 { 4 } else { 8 };
+    for r in 0..rows {
+        out |= outside(&e) << (8 * r);
+        for k in 0..3 {
+            e[k] = _mm256_add_epi32(e[k], y[k]);
+        }
+    }
+    let cols = (1u64 << ni) - 1;
+    !out & (cols * 0x0101_0101_0101_0101) & (u64::MAX >> (64 - 8 * nj))
+}
+
 impl Binner {
     fn new(w: u32, h: u32, cull_back: bool, triangles: usize) -> Self {
         Binner {
@@ -523,14 +561,15 @@ impl Binner {
         }
     }
 
-    /// Sets up one screen triangle and bins it.
-    #[inline]
-    fn add(&mut self, v: [&SVert; 3], id: u32) {
+    /// Sets up one screen triangle and bins it; `AVX2` only where the CPU has it (see
+    /// [`bin_chunk`]). Inlined into it, so that the AVX2 build reaches the coverage.
+    #[inline(always)]
+    fn add<const AVX2: bool>(&mut self, v: [&SVert; 3], id: u32) {
         let Some(tri) = setup(v, id, self.cull_back, self.w, self.h) else {
             return;
         };
         if tri.small {
-            self.small(&tri);
+            self.small::<AVX2>(&tri);
         } else {
             self.big(&tri);
         }
@@ -538,8 +577,8 @@ impl Binner {
 
     /// A small triangle (at most 8 × 8 pixel centres): its coverage as a bit mask, four pixel
     /// centres at a time, and its depth plane where it covers any.
-    #[inline]
-    fn small(&mut self, tri: &Tri) {
+    #[inline(always)]
+    fn small<const AVX2: bool>(&mut self, tri: &Tri) {
         let [a, b, c] = tri.v;
         let sub = 1i32 << SUB_BITS;
         let px0 = tri.i0 * sub + HALF as i32;
@@ -556,6 +595,14 @@ impl Binner {
             step_y[k] = eb * sub;
         }
         let (ni, nj) = (tri.i1 - tri.i0 + 1, tri.j1 - tri.j0 + 1);
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `AVX2` is set only where the CPU has AVX2 (`bin_chunk`).
+        let mask = if AVX2 {
+            unsafe { small_coverage_avx2(row, step_x, step_y, ni, nj) }
+        } else {
+            small_coverage(row, step_x, step_y, ni, nj)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
         let mask = small_coverage(row, step_x, step_y, ni, nj);
         if mask == 0 {
             return;
@@ -631,6 +678,27 @@ impl Binner {
 /// Name of the mesh in validation errors.
 const MESH_NAME: &str = "rasterised mesh";
 
+/// Which compiled build of the setup and the drawing runs: the widest the CPU has, or the
+/// plain one (which the tests compare with it; both give the same bits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Build {
+    Widest,
+    #[cfg(test)]
+    Plain,
+}
+
+impl Build {
+    /// Whether the AVX2 build runs.
+    #[inline]
+    fn avx2(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self == Build::Widest {
+            return std::is_x86_feature_detected!("avx2");
+        }
+        false
+    }
+}
+
 /// Projects the vertices, sets up the triangles (clipped ones become fans, in order) and bins
 /// them by band, in parallel chunks. `Err` for the errors of [`Mesh::validate`], which is folded
 /// into these passes.
@@ -640,6 +708,7 @@ fn setup_binned(
     opts: &RasterOptions,
     w: u32,
     h: u32,
+    build: Build,
 ) -> Result<Vec<Binned>> {
     let invalid = || {
         Err(mesh
@@ -678,48 +747,104 @@ fn setup_binned(
     if bad.load(Ordering::Relaxed) {
         return invalid();
     }
+    let ctx = ChunkCtx {
+        mesh,
+        proj,
+        verts: &verts,
+        w,
+        h,
+        cull_back: opts.cull_back,
+    };
     let chunks: Vec<Binned> = mesh
         .triangles
         .par_chunks(CHUNK)
         .enumerate()
-        .map(|(c, chunk)| {
-            let mut bin = Binner::new(w, h, opts.cull_back, chunk.len());
-            let mut poly = Vec::with_capacity(9);
-            for (k, t) in chunk.iter().enumerate() {
-                let id = (c * CHUNK + k) as u32;
-                let (Some(a), Some(b), Some(cc)) = (
-                    verts.get(t[0] as usize),
-                    verts.get(t[1] as usize),
-                    verts.get(t[2] as usize),
-                ) else {
-                    bad.store(true, Ordering::Relaxed);
-                    continue;
-                };
-                let any = a.out | b.out | cc.out;
-                if any == 0 {
-                    bin.add([&a.s, &b.s, &cc.s], id);
-                    continue;
-                }
-                if a.out & b.out & cc.out != 0 {
-                    continue;
-                }
-                let view = t.map(|i| proj.frame.to_view(mesh.positions[i as usize]));
-                clip(proj, view, any, &mut poly);
-                if poly.len() < 3 {
-                    continue;
-                }
-                let s: Vec<SVert> = poly.iter().map(|v| proj.screen_vertex(*v)).collect();
-                for m in 1..s.len() - 1 {
-                    bin.add([&s[0], &s[m], &s[m + 1]], id);
-                }
-            }
-            bin.finish()
-        })
+        .map(|(c, chunk)| bin_chunk(&ctx, c * CHUNK, chunk, &bad, build))
         .collect();
     if bad.load(Ordering::Relaxed) {
         return invalid();
     }
     Ok(chunks)
+}
+
+/// What every setup chunk reads.
+struct ChunkCtx<'a> {
+    mesh: &'a Mesh,
+    proj: &'a Projector,
+    verts: &'a [PVert],
+    w: u32,
+    h: u32,
+    cull_back: bool,
+}
+
+/// Sets up and bins the triangles `first..` of one chunk; sets `bad` on an index out of
+/// range. Compiled for AVX2 too, where a small triangle's rows take one instruction per edge
+/// (and VEX's three-operand forms spare the register copies); the bits are the same.
+fn bin_chunk(
+    ctx: &ChunkCtx,
+    first: usize,
+    chunk: &[[u32; 3]],
+    bad: &AtomicBool,
+    build: Build,
+) -> Binned {
+    #[cfg(target_arch = "x86_64")]
+    if build.avx2() {
+        // SAFETY: the CPU has AVX2 (`Build::avx2` checked it).
+        return unsafe { bin_chunk_avx2(ctx, first, chunk, bad) };
+    }
+    bin_chunk_any::<false>(ctx, first, chunk, bad)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn bin_chunk_avx2(
+    ctx: &ChunkCtx,
+    first: usize,
+    chunk: &[[u32; 3]],
+    bad: &AtomicBool,
+) -> Binned {
+    bin_chunk_any::<true>(ctx, first, chunk, bad)
+}
+
+#[inline(always)]
+fn bin_chunk_any<const AVX2: bool>(
+    ctx: &ChunkCtx,
+    first: usize,
+    chunk: &[[u32; 3]],
+    bad: &AtomicBool,
+) -> Binned {
+    let (proj, verts) = (ctx.proj, ctx.verts);
+    let mut bin = Binner::new(ctx.w, ctx.h, ctx.cull_back, chunk.len());
+    let mut poly = Vec::with_capacity(9);
+    for (k, t) in chunk.iter().enumerate() {
+        let id = (first + k) as u32;
+        let (Some(a), Some(b), Some(cc)) = (
+            verts.get(t[0] as usize),
+            verts.get(t[1] as usize),
+            verts.get(t[2] as usize),
+        ) else {
+            bad.store(true, Ordering::Relaxed);
+            continue;
+        };
+        let any = a.out | b.out | cc.out;
+        if any == 0 {
+            bin.add::<AVX2>([&a.s, &b.s, &cc.s], id);
+            continue;
+        }
+        if a.out & b.out & cc.out != 0 {
+            continue;
+        }
+        let view = t.map(|i| proj.frame.to_view(ctx.mesh.positions[i as usize]));
+        clip(proj, view, any, &mut poly);
+        if poly.len() < 3 {
+            continue;
+        }
+        let s: Vec<SVert> = poly.iter().map(|v| proj.screen_vertex(*v)).collect();
+        for m in 1..s.len() - 1 {
+            bin.add::<AVX2>([&s[0], &s[m], &s[m + 1]], id);
+        }
+    }
+    bin.finish()
 }
 
 /// Columns 4..8 of every row of a small-triangle mask.
@@ -807,16 +932,43 @@ fn draw_bits<const IDS: bool, const PERSP: bool>(
     }
 }
 
-/// Draws band `band` (rows from `BAND_ROWS * band`, as many as `depth` holds): every chunk's
-/// triangles touching it, in mesh order. Nearest depth wins, the earlier triangle on a tie.
-fn draw_band<const IDS: bool, const PERSP: bool>(
-    chunks: &[Binned],
+/// One band's rows of the output: band `band` (rows from `BAND_ROWS * band`, as many as
+/// `depth` holds) of an image `width` pixels wide.
+struct Band<'a> {
     band: usize,
     width: usize,
-    depth: &mut [f32],
-    cover: &mut [bool],
-    ids: &mut [u32],
-) {
+    depth: &'a mut [f32],
+    cover: &'a mut [bool],
+    ids: &'a mut [u32],
+}
+
+/// Draws a band: every chunk's triangles touching it, in mesh order. Nearest depth wins, the
+/// earlier triangle on a tie. Compiled for AVX2 too (VEX's three-operand forms); the same
+/// operations, so the same bits.
+fn draw_band<const IDS: bool, const PERSP: bool>(chunks: &[Binned], out: Band, build: Build) {
+    #[cfg(target_arch = "x86_64")]
+    if build.avx2() {
+        // SAFETY: the CPU has AVX2 (`Build::avx2` checked it).
+        return unsafe { draw_band_avx2::<IDS, PERSP>(chunks, out) };
+    }
+    draw_band_any::<IDS, PERSP>(chunks, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn draw_band_avx2<const IDS: bool, const PERSP: bool>(chunks: &[Binned], out: Band) {
+    draw_band_any::<IDS, PERSP>(chunks, out)
+}
+
+#[inline(always)]
+fn draw_band_any<const IDS: bool, const PERSP: bool>(chunks: &[Binned], out: Band) {
+    let Band {
+        band,
+        width,
+        depth,
+        cover,
+        ids,
+    } = out;
     let row0 = band * BAND_ROWS as usize;
     let first = row0 * width;
     depth.fill(f32::INFINITY);
@@ -906,11 +1058,12 @@ fn rasterize_impl(
     height: u32,
     opts: &RasterOptions,
     want_ids: bool,
+    build: Build,
 ) -> Result<(DepthMap, Vec<u32>)> {
     camera.validate()?;
     check_size(width, height)?;
     let proj = Projector::new(camera, width, height);
-    let chunks = setup_binned(mesh, &proj, opts, width, height)?;
+    let chunks = setup_binned(mesh, &proj, opts, width, height, build)?;
     // Zeroed (cheap) allocations; every band clears its rows in parallel.
     let n = width as usize * height as usize;
     let mut map = DepthMap {
@@ -924,6 +1077,13 @@ fn rasterize_impl(
     let w = width as usize;
     let chunk = w * BAND_ROWS as usize;
     let persp = proj.persp;
+    let band = |band, depth, cover, ids| Band {
+        band,
+        width: w,
+        depth,
+        cover,
+        ids,
+    };
     if want_ids {
         map.depth
             .par_chunks_mut(chunk)
@@ -932,9 +1092,9 @@ fn rasterize_impl(
             .enumerate()
             .for_each(|(b, ((d, c), id))| {
                 if persp {
-                    draw_band::<true, true>(&chunks, b, w, d, c, id)
+                    draw_band::<true, true>(&chunks, band(b, d, c, id), build)
                 } else {
-                    draw_band::<true, false>(&chunks, b, w, d, c, id)
+                    draw_band::<true, false>(&chunks, band(b, d, c, id), build)
                 }
             });
     } else {
@@ -944,9 +1104,9 @@ fn rasterize_impl(
             .enumerate()
             .for_each(|(b, (d, c))| {
                 if persp {
-                    draw_band::<false, true>(&chunks, b, w, d, c, &mut [])
+                    draw_band::<false, true>(&chunks, band(b, d, c, &mut []), build)
                 } else {
-                    draw_band::<false, false>(&chunks, b, w, d, c, &mut [])
+                    draw_band::<false, false>(&chunks, band(b, d, c, &mut []), build)
                 }
             });
     }
@@ -966,7 +1126,7 @@ pub fn rasterize_depth_with(
     height: u32,
     opts: &RasterOptions,
 ) -> Result<DepthMap> {
-    Ok(rasterize_impl(mesh, camera, width, height, opts, false)?.0)
+    Ok(rasterize_impl(mesh, camera, width, height, opts, false, Build::Widest)?.0)
 }
 
 /// The depth map and, per pixel, the index of the mesh triangle that won it (`u32::MAX` where
@@ -978,7 +1138,7 @@ pub fn rasterize_triangle_ids(
     height: u32,
     opts: &RasterOptions,
 ) -> Result<(DepthMap, Vec<u32>)> {
-    rasterize_impl(mesh, camera, width, height, opts, true)
+    rasterize_impl(mesh, camera, width, height, opts, true, Build::Widest)
 }
 
 /// Interpolates a per-vertex attribute over the visible surface: for each covered pixel, the
@@ -1588,12 +1748,18 @@ mod tests {
                     let (depth, cover, ids) = reference(&m, &cam, w, h, &opts);
                     let (map, got_ids) = rasterize_triangle_ids(&m, &cam, w, h, &opts).unwrap();
                     let only = rasterize_depth_with(&m, &cam, w, h, &opts).unwrap();
+                    // The plain build too, where the widest is AVX2.
+                    let (plain, plain_ids) =
+                        rasterize_impl(&m, &cam, w, h, &opts, true, Build::Plain).unwrap();
                     for (k, d) in depth.iter().enumerate() {
                         let at = format!("round {round}, {cam:?}, {opts:?}, pixel {k}");
                         assert_eq!(map.depth[k].to_bits(), d.to_bits(), "{at}");
                         assert_eq!(only.depth[k].to_bits(), d.to_bits(), "{at}");
+                        assert_eq!(plain.depth[k].to_bits(), d.to_bits(), "{at}, plain");
                         assert_eq!(map.coverage[k], cover[k], "{at}");
+                        assert_eq!(plain.coverage[k], cover[k], "{at}, plain");
                         assert_eq!(got_ids[k], ids[k], "{at}");
+                        assert_eq!(plain_ids[k], ids[k], "{at}, plain");
                     }
                     let mut visible = ids.clone();
                     visible.sort_unstable();
@@ -1601,7 +1767,7 @@ mod tests {
                     assert!(visible.len() > 100, "{} triangles visible", visible.len());
                     // Every path of the binned rasteriser is taken.
                     let proj = Projector::new(&cam, w, h);
-                    for ch in setup_binned(&m, &proj, &opts, w, h).unwrap() {
+                    for ch in setup_binned(&m, &proj, &opts, w, h, Build::Widest).unwrap() {
                         for r in &ch.recs {
                             paths[0] += (r.mask == 0) as usize;
                             paths[1] += (r.mask != 0 && r.rows && r.mask & WIDE == 0) as usize;

@@ -617,7 +617,24 @@ impl AxisGrid {
         [x, y, z]
     }
 
+    /// Compiled for AVX2 too, where the CPU has it (the same operations, so the same grid).
     fn new(tris: &[[Vec3; 3]], bounds: &Aabb, axis: usize) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { Self::new_avx2(tris, bounds, axis) };
+        }
+        Self::new_any(tris, bounds, axis)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn new_avx2(tris: &[[Vec3; 3]], bounds: &Aabb, axis: usize) -> Self {
+        Self::new_any(tris, bounds, axis)
+    }
+
+    #[inline(always)]
+    fn new_any(tris: &[[Vec3; 3]], bounds: &Aabb, axis: usize) -> Self {
         match axis {
             0 => Self::along::<0>(tris, bounds),
             1 => Self::along::<1>(tris, bounds),
@@ -627,6 +644,7 @@ impl AxisGrid {
 
     /// [`AxisGrid::new`] with the axis fixed when compiling: a corner's projected
     /// coordinates are then plain loads, not a `Vec3` indexed through the stack.
+    #[inline(always)]
     fn along<const AXIS: usize>(tris: &[[Vec3; 3]], bounds: &Aabb) -> Self {
         let uv = [(AXIS + 1) % 3, (AXIS + 2) % 3];
         let proj = |v: Vec3| DVec2::new(v[uv[0]] as f64, v[uv[1]] as f64);
@@ -660,12 +678,13 @@ impl AxisGrid {
         // to 0).
         let last = [(n[0] - 1) as f64, (n[1] - 1) as f64];
         let cell_of = |g: DVec2| {
-            // SAFETY: in [0, n − 1], which a usize holds: the plain conversion, which
-            // saturates, was ten instructions a coordinate.
+            // SAFETY: in [0, n − 1], which an i64 holds: the plain conversion, which
+            // saturates, was ten instructions a coordinate, and one to an unsigned integer
+            // seven (x86-64 converts to signed ones in one).
             unsafe {
                 [
-                    g.x.max(0.0).min(last[0]).to_int_unchecked::<usize>(),
-                    g.y.max(0.0).min(last[1]).to_int_unchecked::<usize>(),
+                    g.x.max(0.0).min(last[0]).to_int_unchecked::<i64>() as usize,
+                    g.y.max(0.0).min(last[1]).to_int_unchecked::<i64>() as usize,
                 ]
             }
         };
@@ -736,12 +755,13 @@ impl AxisGrid {
         if !(c.x >= 0.0 && c.y >= 0.0 && c.x < n.x && c.y < n.y) {
             return None;
         }
-        // SAFETY: in [0, n + 1) (tested just above), which a usize holds: the plain
-        // conversion, which saturates, was ten instructions a coordinate.
+        // SAFETY: in [0, n + 1) (tested just above), which an i64 holds: the plain
+        // conversion, which saturates, was ten instructions a coordinate, and one to an
+        // unsigned integer seven (see `along`).
         let (x, y) = unsafe {
             (
-                c.x.to_int_unchecked::<usize>(),
-                c.y.to_int_unchecked::<usize>(),
+                c.x.to_int_unchecked::<i64>() as usize,
+                c.y.to_int_unchecked::<i64>() as usize,
             )
         };
         Some(y.min(self.n[1] - 1) * self.n[0] + x.min(self.n[0] - 1))
@@ -941,6 +961,7 @@ fn grid(min: DVec2, cell: DVec2, x: Vec2) -> DVec2 {
 /// the sorted order (`sorted`: each triangle's box and the first and last cell it meets, in
 /// a grid of `n` cells); a list's last block is padded with empty boxes.
 #[allow(clippy::type_complexity)]
+#[inline(always)]
 fn fill_blocks(
     sorted: &[((Vec2, Vec2), [[usize; 2]; 2])],
     starts: &[u32],
@@ -1187,6 +1208,41 @@ mod tests {
                 b.iter()
                     .any(|blk| blk.holds(Vec2::new(blk.lo_u[0], blk.lo_v[0])) & 1 == 1)
             );
+        }
+    }
+
+    /// The grids are the same bits from the AVX2 build of their construction as from the
+    /// plain one: the cells, the lists' blocks (padding included) and the triangles.
+    #[test]
+    fn grids_same_in_both_builds() {
+        let mut u = boxed(Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.3, 0.8));
+        u.append(&boxed(Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.5, 1.0, 0.6)));
+        for mesh in [torus(0.5, 0.2, 60, 24), u, uv_sphere(1.0, 300, 8)] {
+            let tris: Vec<[Vec3; 3]> = (0..mesh.triangles.len())
+                .map(|t| mesh.triangle(t))
+                .collect();
+            for axis in 0..3 {
+                let a = AxisGrid::new(&tris, &mesh.bounds(), axis);
+                let b = AxisGrid::new_any(&tris, &mesh.bounds(), axis);
+                assert_eq!(
+                    (a.min, a.cell, a.n, &a.starts),
+                    (b.min, b.cell, b.n, &b.starts)
+                );
+                let bits = |g: &AxisGrid| -> Vec<u32> {
+                    let blocks = g.blocks.iter().flat_map(|k| {
+                        let bounds = [k.lo_u, k.lo_v, k.hi_u, k.hi_v];
+                        let floats = bounds.into_iter().flatten().map(f32::to_bits);
+                        floats.chain(k.items).collect::<Vec<_>>()
+                    });
+                    let corners = g.tris.iter().flat_map(|t| {
+                        let p = t.p.iter().flat_map(|p| p.to_array());
+                        p.chain(t.w).map(f32::to_bits).collect::<Vec<_>>()
+                    });
+                    blocks.chain(corners).collect()
+                };
+                assert_eq!(bits(&a), bits(&b), "axis {axis}");
+                assert!(!a.blocks.is_empty() && !a.tris.is_empty());
+            }
         }
     }
 
