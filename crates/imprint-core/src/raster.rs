@@ -121,14 +121,14 @@ impl Projector {
         [v.z - self.near, self.far - v.z, g + x, g - x, g + y, g - y]
     }
 
+    /// A bit per plane the point is outside of (a NaN value counts as outside).
     #[inline]
     fn outcode(&self, v: Vec3) -> u8 {
         let p = self.plane_values(v);
         let mut code = 0;
         for (i, d) in p.iter().enumerate() {
-            if d.is_nan() || *d < 0.0 {
-                code |= 1 << i;
-            }
+            // Not `d >= 0`: negative or NaN, one comparison and no branch.
+            code |= ((*d >= 0.0) as u8 ^ 1) << i;
         }
         code
     }
@@ -138,8 +138,8 @@ impl Projector {
     fn screen_vertex(&self, v: Vec3) -> SVert {
         let (px, py) = self.view_to_px(v);
         SVert {
-            x: crate::geom::floor_i(px * SUB + 0.5),
-            y: crate::geom::floor_i(py * SUB + 0.5),
+            x: floor_in_guard(px * SUB + 0.5),
+            y: floor_in_guard(py * SUB + 0.5),
             z: if self.persp { 1.0 / v.z } else { v.z },
             fx: px,
             fy: py,
@@ -210,6 +210,23 @@ impl DepthMap {
         let (x, y) = p.view_to_px(v);
         Some((x, y, v.z))
     }
+}
+
+/// [`crate::geom::floor_i`] of a snapped coordinate, clamped to ±2^30 first (`max` takes a
+/// NaN to the bound), so that the conversion needs none of the saturating cast's fix-ups
+/// (about a dozen instructions each). Inside the guard band (or clipped onto it) the
+/// coordinates are below 2^29 in magnitude, so the clamp changes nothing there; it keeps the
+/// setup's premise (coordinates below 2^30) even for a vertex clipped to a perspective
+/// camera's near plane with rounding to spare.
+#[inline(always)]
+fn floor_in_guard(x: f32) -> i32 {
+    const LIMIT: f32 = (1u32 << 30) as f32;
+    // Not `clamp`, which keeps a NaN.
+    #[allow(clippy::manual_clamp)]
+    let x = x.max(-LIMIT).min(LIMIT);
+    // SAFETY: finite and within ±2^30 (clamped just above).
+    let i = unsafe { x.to_int_unchecked::<i32>() };
+    if (i as f32) > x { i - 1 } else { i }
 }
 
 /// A screen vertex: position in 1/256 pixel, and the interpolated depth quantity (view depth
@@ -731,16 +748,7 @@ fn setup_binned(
         .par_chunks_mut(4096)
         .zip(mesh.positions.par_chunks(4096))
         .for_each(|(out, pos)| {
-            let mut finite = true;
-            for (o, p) in out.iter_mut().zip(pos) {
-                finite &= p.is_finite();
-                let v = proj.frame.to_view(*p);
-                o.out = proj.outcode(v);
-                if o.out == 0 {
-                    o.s = proj.screen_vertex(v);
-                }
-            }
-            if !finite {
+            if !project_chunk(proj, pos, out, build) {
                 bad.store(true, Ordering::Relaxed);
             }
         });
@@ -765,6 +773,37 @@ fn setup_binned(
         return invalid();
     }
     Ok(chunks)
+}
+
+/// Projects `pos` into `out` (outcodes, and the screen vertex where inside every plane);
+/// false when a position is not finite. Compiled for AVX2 too, with the same bits.
+fn project_chunk(proj: &Projector, pos: &[Vec3], out: &mut [PVert], build: Build) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if build.avx2() {
+        // SAFETY: the CPU has AVX2 (`Build::avx2` checked it).
+        return unsafe { project_chunk_avx2(proj, pos, out) };
+    }
+    project_chunk_any(proj, pos, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn project_chunk_avx2(proj: &Projector, pos: &[Vec3], out: &mut [PVert]) -> bool {
+    project_chunk_any(proj, pos, out)
+}
+
+#[inline(always)]
+fn project_chunk_any(proj: &Projector, pos: &[Vec3], out: &mut [PVert]) -> bool {
+    let mut finite = true;
+    for (o, p) in out.iter_mut().zip(pos) {
+        finite &= p.is_finite();
+        let v = proj.frame.to_view(*p);
+        o.out = proj.outcode(v);
+        if o.out == 0 {
+            o.s = proj.screen_vertex(v);
+        }
+    }
+    finite
 }
 
 /// What every setup chunk reads.
@@ -1231,6 +1270,31 @@ mod tests {
 
     fn ortho_down_z(center: Vec3, half_height: f32) -> Camera {
         Camera::orthographic(center + Vec3::Z * 5.0, center, Vec3::Y, half_height).unwrap()
+    }
+
+    /// The snapped coordinates' floor is `geom::floor_i`'s inside ±2^30 (where every vertex
+    /// in the guard band lies), and defined past it: NaN and ±∞ go to the bounds.
+    #[test]
+    fn floor_in_guard_is_floor_i_in_range() {
+        let mut x = 0x2545_f491u32;
+        let mut values = vec![
+            0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 1e-30, -1e-30, 5.3e8, -5.3e8,
+        ];
+        for _ in 0..100_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let scale = [1.0, 300.0, 7e4, 1e7, 1.07e9][(x % 5) as usize];
+            values.push(((x >> 8) as f32 / (1u32 << 24) as f32 - 0.5) * 2.0 * scale);
+        }
+        for v in values {
+            assert_eq!(floor_in_guard(v), crate::geom::floor_i(v), "{v}");
+        }
+        let limit = 1 << 30;
+        assert_eq!(floor_in_guard(f32::NAN), -limit);
+        assert_eq!(floor_in_guard(f32::INFINITY), limit);
+        assert_eq!(floor_in_guard(f32::NEG_INFINITY), -limit);
+        assert_eq!(floor_in_guard(3e9), limit);
     }
 
     #[test]
