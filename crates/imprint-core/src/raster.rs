@@ -21,10 +21,10 @@
 //! validation of the mesh). Triangles are then set up in parallel chunks of mesh order. A
 //! small triangle (at most 8 × 8 pixel centres, the common case at depth-map resolutions)
 //! gets its coverage right away, as a bit mask from its edge functions evaluated four pixel
-//! centres at a time (eight, in integers, where the CPU has AVX2: the setup and the drawing
-//! are compiled for it too, with the same bits), and its depth plane, and is kept per band it
-//! touches as a compact
-//! record; a larger one is kept set up and drawn row by row in each band it touches. Each
+//! centres at a time (eight, in integers, where the CPU has AVX2: the projection, the setup
+//! and the drawing are compiled for it too, with the same bits), and its depth plane, and is
+//! kept per band it touches as a compact record; a larger one is kept set up and drawn row
+//! by row in each band it touches. Each
 //! band then draws its records chunk after chunk, so in mesh order. Within a band a
 //! triangle's depth is interpolated from its first row in the band (see `BAND_ROWS`).
 
@@ -593,7 +593,7 @@ impl Binner {
     }
 
     /// A small triangle (at most 8 × 8 pixel centres): its coverage as a bit mask, four pixel
-    /// centres at a time, and its depth plane where it covers any.
+    /// centres at a time (eight with AVX2), and its depth plane where it covers any.
     #[inline(always)]
     fn small<const AVX2: bool>(&mut self, tri: &Tri) {
         let [a, b, c] = tri.v;
