@@ -319,27 +319,39 @@ fn explore_limits() {
     }
 }
 
+/// Runs `pose` over `frames` on a pool of `threads` and gives back the bits of the particles
+/// and the vertices, after checking that every one is finite.
+fn bits_on_threads(
+    threads: usize,
+    mesh: &Mesh,
+    rig: &Rig,
+    params: &ParticleParams,
+    pose: &(dyn Fn(u32) -> Vec<Affine3A> + Sync),
+    frames: std::ops::Range<u32>,
+) -> (Vec<u32>, Vec<u32>) {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| {
+            let mut skin = ParticleSkin::new(mesh, &rig.rest_segments(), params).unwrap();
+            run(&mut skin, pose, frames);
+            let (p, v) = (skin.positions().to_vec(), skin.vertices());
+            assert!(p.iter().chain(&v).all(|x| x.is_finite()));
+            let bits = |v: &[Vec3]| -> Vec<u32> {
+                v.iter()
+                    .flat_map(|p| p.to_array().map(f32::to_bits))
+                    .collect()
+            };
+            (bits(&p), bits(&v))
+        })
+}
+
 #[test]
 fn same_bytes_on_any_thread_count() {
     let (mesh, rig) = two_bone_limb(R, LEN, 16, 10);
-    let go = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut skin =
-                    ParticleSkin::new(&mesh, &rig.rest_segments(), &Default::default()).unwrap();
-                let pose = |f: u32| twist(&rig, ramp(f, 6, 120.0)).skin;
-                run(&mut skin, &pose, 0..8);
-                let bits = |v: &[Vec3]| -> Vec<u32> {
-                    v.iter()
-                        .flat_map(|p| p.to_array().map(f32::to_bits))
-                        .collect()
-                };
-                (bits(skin.positions()), bits(&skin.vertices()))
-            })
-    };
+    let pose = |f: u32| twist(&rig, ramp(f, 6, 120.0)).skin;
+    let go = |threads| bits_on_threads(threads, &mesh, &rig, &Default::default(), &pose, 0..8);
     let one = go(1);
     assert_eq!(one, go(3));
     assert_eq!(one, go(1));
@@ -352,28 +364,11 @@ fn same_bytes_on_any_thread_count() {
 #[test]
 fn same_bytes_on_any_thread_count_at_the_benchmark_scale() {
     let (mesh, rig) = two_bone_limb(R, 1.4, 100, 100);
+    let pose = |f: u32| bend(&rig, ramp(f, 12, 60.0)).skin;
     for params in [ParticleParams::default(), ParticleParams::t_method()] {
-        let go = |threads: usize| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| {
-                    let mut skin = ParticleSkin::new(&mesh, &rig.rest_segments(), &params).unwrap();
-                    let pose = |f: u32| bend(&rig, ramp(f, 12, 60.0)).skin;
-                    run(&mut skin, &pose, 0..12);
-                    let (p, v) = (skin.positions().to_vec(), skin.vertices());
-                    assert!(p.len() > 4000 && v.len() == mesh.positions.len());
-                    assert!(p.iter().chain(&v).all(|x| x.is_finite()));
-                    let bits = |v: &[Vec3]| -> Vec<u32> {
-                        v.iter()
-                            .flat_map(|p| p.to_array().map(f32::to_bits))
-                            .collect()
-                    };
-                    (bits(&p), bits(&v))
-                })
-        };
-        assert_eq!(go(1), go(2));
+        let one = bits_on_threads(1, &mesh, &rig, &params, &pose, 0..12);
+        assert!(one.0.len() > 3 * 4000 && one.1.len() == 3 * mesh.positions.len());
+        assert_eq!(one, bits_on_threads(2, &mesh, &rig, &params, &pose, 0..12));
     }
 }
 
