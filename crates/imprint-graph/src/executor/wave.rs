@@ -90,7 +90,8 @@ impl Executor {
                 .warnings
                 .push(format!("node '{}': {w}", slot.name));
         }
-        let step = match result.and_then(|step| finite(step, &slot.name, frame)) {
+        let checked = job.own.as_ref();
+        let step = match result.and_then(|step| finite(step, checked, &slot.name, frame)) {
             Ok(step) => step,
             Err(e) => {
                 // The last good value stays, for a viewer that goes on after the error.
@@ -131,9 +132,16 @@ impl Executor {
     }
 }
 
-/// Never silent: a published value that is not finite stops the run, named.
-fn finite(step: Step, node: &str, frame: u32) -> imprint_core::Result<Step> {
-    match step.published.as_ref().and_then(Value::first_non_finite) {
+/// Never silent: a published value that is not finite stops the run, named. What the node's
+/// last value (`before`) held was checked when it was published.
+fn finite(
+    step: Step,
+    before: Option<&Value>,
+    node: &str,
+    frame: u32,
+) -> imprint_core::Result<Step> {
+    let published = step.published.as_ref();
+    match published.and_then(|v| v.first_non_finite_since(before)) {
         None => Ok(step),
         Some(what) => Err(imprint_core::Error::Numerical {
             node: node.to_string(),

@@ -66,7 +66,16 @@ pub struct FieldSchedule {
     state: BuildState,
     /// Interpolate: the builds finished on this frame, with their meshes (for measurement).
     pub finished: Vec<(Arc<DistanceField>, Arc<Mesh>)>,
+    /// Interpolate: builds the segment left behind, given back to `builder` once no one
+    /// else holds them (last frame's value and a consumer's copy let go a frame or two
+    /// later). A fresh build's buffers cost page faults: 48 MiB for a 128³ field and its
+    /// cells, once every `every` frames.
+    retired: Vec<Arc<DistanceField>>,
 }
+
+/// Retired builds kept waiting for their holders to let go; older ones are dropped (a
+/// holder that keeps them longer keeps their memory, which is then not ours to reuse).
+const RETIRED_KEPT: usize = 2;
 
 /// A field node's builds between frames.
 #[derive(Default, Serialize, Deserialize)]
@@ -95,6 +104,7 @@ impl FieldSchedule {
             ahead,
             state: BuildState::default(),
             finished: Vec::new(),
+            retired: Vec::new(),
         }
     }
 
@@ -169,6 +179,7 @@ impl FieldSchedule {
     ) -> imprint_core::Result<BuildStep> {
         let sc = self.schedule;
         self.finished.clear();
+        self.recycle_retired();
         let mut worked = false;
         if is_static {
             if self.state.keys.is_empty() {
@@ -234,7 +245,11 @@ impl FieldSchedule {
                 worked = true;
             }
         }
-        self.state.keys.retain(|&k, _| k >= a);
+        let kept = self.state.keys.split_off(&a);
+        let left = std::mem::replace(&mut self.state.keys, kept);
+        self.retired.extend(left.into_values());
+        let excess = self.retired.len().saturating_sub(RETIRED_KEPT);
+        self.retired.drain(..excess);
         Ok(BuildStep {
             published: Some(Published::Blend {
                 a: self.state.keys[&a].clone(),
@@ -255,6 +270,16 @@ impl FieldSchedule {
 
     pub fn set_state(&mut self, state: BuildState) {
         self.state = state;
+    }
+
+    /// Gives the retired builds no one else holds back to the builder, for their buffers.
+    fn recycle_retired(&mut self) {
+        for f in std::mem::take(&mut self.retired) {
+            match Arc::try_unwrap(f) {
+                Ok(f) => self.builder.recycle(f),
+                Err(held) => self.retired.push(held),
+            }
+        }
     }
 
     /// Keyframe `key`'s build, whole, now.
