@@ -267,7 +267,7 @@ fn triangles_on_grid_planes_leave_no_gaps() {
             .collect();
         assert_eq!(b.cells, expected, "box {lo}..{hi}");
         // Every boundary point lies on the box surface.
-        for p in &b.points {
+        for p in b.points.iter() {
             let d = (p - lo).min(hi - p).abs().min_element();
             assert!(d < 1e-5, "{p}");
         }

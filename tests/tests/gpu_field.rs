@@ -52,7 +52,7 @@ fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
     let worst = cpu
         .points
         .iter()
-        .zip(&gpu.points)
+        .zip(gpu.points.iter())
         .map(|(a, b)| (*a - *b).length() / cell)
         .fold(0.0f32, f32::max);
     assert!(
@@ -63,7 +63,7 @@ fn assert_same_boundary(name: &str, cpu: &Boundary, gpu: &Boundary) {
     assert_eq!(gpu.faces.len(), gpu.len(), "{name}: GPU faces");
     let spec = cpu.spec;
     let mut swapped = 0;
-    for (k, (fc, fg)) in cpu.faces.iter().zip(&gpu.faces).enumerate() {
+    for (k, (fc, fg)) in cpu.faces.iter().zip(gpu.faces.iter()).enumerate() {
         if fc != fg {
             let x = spec.coords(cpu.cells[k] as usize).as_vec3();
             let d = |f: &[Vec3; 3]| {

@@ -38,7 +38,7 @@ fn gpu_inside_bits_are_the_cpus() {
             .unwrap()
             .to_cpu(ctx)
             .unwrap();
-        assert_eq!(field.inside.as_deref(), Some(words), "{name}");
+        assert_eq!(field.inside.as_ref(), Some(words), "{name}");
     }
     // An open mesh: no inside on either path.
     let open = primitives::plane(1.0, 4);

@@ -33,10 +33,15 @@ pub struct Pairs {
     tri: [[Lanes; 3]; 3],
 }
 
-/// What [`Pairs::closest`] gives per lane: the closest point `q` and `|q - p|²`.
+/// What [`Pairs::closest`] gives per lane: the closest point `q` and `|q - p|²`. The
+/// kernel writes it in place (it was copied out of a struct of its own, 512 bytes through
+/// `memcpy` for every 32 pairs, a twentieth of the field refinement's time).
+#[derive(Default)]
 pub struct Closest {
     pub q: [Lanes; 3],
     pub d2: Lanes,
+    /// The scalar function's collinear fallback applies: redo the lane with it.
+    degenerate: [bool; LANES],
 }
 
 impl Pairs {
@@ -130,12 +135,11 @@ impl Pairs {
         }
     }
 
-    /// Every lane's closest point and squared distance, the scalar function's bits (a lane
-    /// the kernel cannot take is redone by the scalar function).
+    /// Every lane's closest point and squared distance into `out`, the scalar function's
+    /// bits (a lane the kernel cannot take is redone by the scalar function).
     #[inline]
-    pub fn closest(&self) -> Closest {
-        let mut out = Out::default();
-        kernel(&self.p, &self.tri, &mut out);
+    pub fn closest(&self, out: &mut Closest) {
+        kernel(&self.p, &self.tri, out);
         // Nearly never: one test of all lanes (no early exit, so it vectorises) first.
         let any = out.degenerate.iter().fold(false, |any, &d| any | d);
         for l in (0..LANES).filter(|&l| any && out.degenerate[l]) {
@@ -147,10 +151,6 @@ impl Pairs {
             }
             out.d2[l] = (q - p).length_squared();
         }
-        Closest {
-            q: out.q,
-            d2: out.d2,
-        }
     }
 }
 
@@ -159,6 +159,7 @@ pub struct Batch<T> {
     pairs: Pairs,
     tags: [T; LANES],
     len: usize,
+    out: Closest,
 }
 
 impl<T: Copy + Default> Default for Batch<T> {
@@ -167,6 +168,7 @@ impl<T: Copy + Default> Default for Batch<T> {
             pairs: Pairs::default(),
             tags: [T::default(); LANES],
             len: 0,
+            out: Closest::default(),
         }
     }
 }
@@ -190,7 +192,8 @@ impl<T: Copy + Default> Batch<T> {
         if self.len == 0 {
             return;
         }
-        let out = self.pairs.closest();
+        let out = &mut self.out;
+        self.pairs.closest(out);
         for l in 0..self.len {
             let q = Vec3::new(out.q[0][l], out.q[1][l], out.q[2][l]);
             f(self.tags[l], q, out.d2[l]);
@@ -199,18 +202,10 @@ impl<T: Copy + Default> Batch<T> {
     }
 }
 
-#[derive(Default)]
-struct Out {
-    q: [Lanes; 3],
-    d2: Lanes,
-    /// The scalar function's collinear fallback applies: redo the lane with it.
-    degenerate: [bool; LANES],
-}
-
 /// The lanes through AVX-512 or AVX where the CPU has them (decided once per process), else
 /// SSE2.
 #[inline]
-fn kernel(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Out) {
+fn kernel(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Closest) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx512f") {
         // SAFETY: the CPU has AVX-512F (checked just above).
@@ -228,21 +223,21 @@ fn kernel(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Out) {
 /// does not contract a multiply and an add into a fused one).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn kernel_avx(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Out) {
+unsafe fn kernel_avx(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Closest) {
     kernel_lanes(p, tri, out)
 }
 
 /// [`kernel_lanes`] compiled for AVX-512F: the same operations, with 32 vector registers.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn kernel_avx512(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Out) {
+unsafe fn kernel_avx512(p: &[Lanes; 3], tri: &[[Lanes; 3]; 3], out: &mut Closest) {
     kernel_lanes(p, tri, out)
 }
 
 /// [`closest_point_on_triangle`] per lane, every region computed and the first that applies
 /// selected (the scalar function's `return`s in reverse order, so earlier ones win).
 #[inline(always)]
-fn kernel_lanes(p: &[Lanes; 3], [a, b, c]: &[[Lanes; 3]; 3], out: &mut Out) {
+fn kernel_lanes(p: &[Lanes; 3], [a, b, c]: &[[Lanes; 3]; 3], out: &mut Closest) {
     for l in 0..LANES {
         let v3 = |v: &[Lanes; 3]| [v[0][l], v[1][l], v[2][l]];
         let (p, a, b, c) = (v3(p), v3(a), v3(b), v3(c));
@@ -396,7 +391,7 @@ mod tests {
     /// the kernel's regions answer those itself).
     #[test]
     fn every_kernel_build_gives_the_same_bits() {
-        type Kernel = unsafe fn(&[Lanes; 3], &[[Lanes; 3]; 3], &mut Out);
+        type Kernel = unsafe fn(&[Lanes; 3], &[[Lanes; 3]; 3], &mut Closest);
         let mut kernels: Vec<(&str, Kernel)> = vec![("sse2", |p, t, o| kernel_lanes(p, t, o))];
         #[cfg(target_arch = "x86_64")]
         {
@@ -416,7 +411,7 @@ mod tests {
                     lanes.set_point(l, p);
                     lanes.set_triangle(l, &t);
                 }
-                let mut out = Out::default();
+                let mut out = Closest::default();
                 // SAFETY: each build is listed only when the CPU has its features.
                 unsafe { k(&lanes.p, &lanes.tri, &mut out) };
                 for (l, &pair) in chunk.iter().enumerate() {

@@ -21,7 +21,7 @@
 
 use glam::Vec3;
 use imprint_core::cache::prefetch;
-use imprint_core::closest::{LANES, Pairs};
+use imprint_core::closest::{Closest, LANES, Pairs};
 use imprint_core::field::{LazyCells, SpareCells, band_span};
 use imprint_core::geom::{ceil_i, floor_i};
 use imprint_core::pool::Pool;
@@ -207,11 +207,11 @@ pub struct FieldBuild {
     /// The refinement's per-slab owners (contents do not matter between slabs).
     #[serde(skip)]
     owners: Arc<Pool<Vec<Owned>>>,
-    points: Vec<Vec3>,
-    world_faces: Option<Vec<[Vec3; 3]>>,
+    points: Arc<Vec<Vec3>>,
+    world_faces: Option<Arc<Vec<[Vec3; 3]>>>,
     /// The boundary's inside cells: the field's sign.
     #[serde(default)]
-    inside: Option<Vec<u32>>,
+    inside: Option<Arc<Vec<u32>>>,
     /// Per row (`y + ny z`), the band span the refinement found (refinement only): the
     /// field's cells use them.
     spans: Vec<[u32; 2]>,
@@ -375,9 +375,9 @@ impl FieldBuild {
             band: self.band,
             dist: self.dist,
             nearest: self.nearest,
-            points: Arc::new(self.points),
-            faces: self.world_faces.map(Arc::new),
-            inside: self.inside.map(Arc::new),
+            points: self.points,
+            faces: self.world_faces,
+            inside: self.inside,
             cells: LazyCells::built(builder.spare_cells.take(), spans),
         }
     }
@@ -515,8 +515,9 @@ impl RefineSlab<'_> {
 /// Up to [`LANES`] band cells waiting for their best triangles: one cell per lane.
 #[derive(Default)]
 struct Group {
-    /// The cells' points (grid units), against a triangle per lane.
+    /// The cells' points (grid units), against a triangle per lane, and their closest points.
     pairs: Pairs,
+    out: Closest,
     cells: Cells,
     len: usize,
 }
@@ -586,9 +587,10 @@ impl<'a> Neighbours<'a> {
             c.cands.iter_mut().for_each(|cands| cands[l] = cands[0]);
         }
         let mut best = ([f32::INFINITY; LANES], [u32::MAX; LANES]);
-        best = keep_better(best, &mut group.pairs, faces, &c.own);
+        let (pairs, out) = (&mut group.pairs, &mut group.out);
+        best = keep_better(best, pairs, out, faces, &c.own);
         for cands in &c.cands {
-            best = keep_better(best, &mut group.pairs, faces, cands);
+            best = keep_better(best, pairs, out, faces, cands);
         }
         best
     }
@@ -602,11 +604,13 @@ impl<'a> Neighbours<'a> {
 fn keep_better(
     best: (Lanes, [u32; LANES]),
     pairs: &mut Pairs,
+    out: &mut Closest,
     faces: &[[Vec3; 3]],
     cands: &[u32; LANES],
 ) -> (Lanes, [u32; LANES]) {
     pairs.set_triangles(faces, cands);
-    let d2 = pairs.closest().d2;
+    pairs.closest(out);
+    let d2 = &out.d2;
     let mut out = ([0.0f32; LANES], [0u32; LANES]);
     for l in 0..LANES {
         let (d, o, n) = (best.0[l], best.1[l], cands[l]);
@@ -981,8 +985,8 @@ mod tests {
             spec,
             variant: BoundaryVariant::Closest,
             cells: Vec::new(),
-            points: Vec::new(),
-            faces: Vec::new(),
+            points: Default::default(),
+            faces: Default::default(),
             inside: None,
         };
         let e = FieldBuilder::default()

@@ -18,7 +18,6 @@ use super::cpu::validate_band;
 use crate::voxel::gpu::GpuBoundary;
 use imprint_core::{BoundaryVariant, DistanceField, Error, Result};
 use imprint_gpu::{Dispatch, GpuContext, GpuTimer, record_pass, shader, submit};
-use std::sync::Arc;
 
 /// Bytes per cell of the field's largest buffer (the vec4 field; the limit is per binding).
 const BYTES_PER_CELL: u64 = 16;
@@ -78,10 +77,9 @@ impl GpuField {
             band: self.band,
             dist,
             nearest,
-            faces: (self.boundary.variant == BoundaryVariant::Closest)
-                .then(|| Arc::new(boundary.faces)),
-            points: Arc::new(boundary.points),
-            inside: boundary.inside.map(Arc::new),
+            faces: (self.boundary.variant == BoundaryVariant::Closest).then_some(boundary.faces),
+            points: boundary.points,
+            inside: boundary.inside,
             cells: Default::default(),
         })
     }

@@ -23,6 +23,7 @@ use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
 use imprint_core::pool::Pool;
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Half-size of the closed cell box in the overlap test: a hair over 0.5 so that a triangle
 /// lying exactly on a cell face marks both cells even after rounding.
@@ -117,26 +118,45 @@ impl Voxelizer {
                 part
             })
             .collect();
-        let total = parts.iter().map(|p| p.0.len()).sum();
-        let mut cells = Vec::with_capacity(total);
-        let mut points = Vec::with_capacity(total);
-        let mut faces = Vec::with_capacity(total);
-        for (c, p, f) in parts {
-            cells.extend(c);
-            points.extend(p);
-            faces.extend(f);
-        }
+        let cells = concat(&parts, |p| &p.0);
+        let points = concat(&parts, |p| &p.1);
+        let faces = concat(&parts, |p| &p.2);
         let inside = (self.signed && self.closed.is_closed(mesh))
-            .then(|| super::solid::inside_cells(&spec, &verts, &mesh.triangles));
+            .then(|| Arc::new(super::solid::inside_cells(&spec, &verts, &mesh.triangles)));
         Ok(Boundary {
             spec,
             variant,
             cells,
-            points,
-            faces,
+            points: Arc::new(points),
+            faces: Arc::new(faces),
             inside,
         })
     }
+}
+
+/// The slabs' lists of one kind (`list` of each part), joined in slab order, the parts copied
+/// side by side: joined one after another, the faces alone (36 bytes a surface cell) were a
+/// serial pass of a tenth of a millisecond per 10k cells.
+fn concat<T: Copy + Send + Sync>(
+    parts: &[BoundaryPart],
+    list: impl Fn(&BoundaryPart) -> &Vec<T> + Sync,
+) -> Vec<T> {
+    let total = parts.iter().map(|p| list(p).len()).sum();
+    let mut out = Vec::with_capacity(total);
+    let mut free = &mut out.spare_capacity_mut()[..total];
+    let mut dests = Vec::with_capacity(parts.len());
+    for p in parts {
+        let (dest, rest) = free.split_at_mut(list(p).len());
+        dests.push(dest);
+        free = rest;
+    }
+    dests.into_par_iter().zip(parts).for_each(|(dest, p)| {
+        dest.write_copy_of_slice(list(p));
+    });
+    // SAFETY: the parts' lengths sum to `total` and each part was copied into its own range
+    // of the first `total` slots, so every one of them is initialised.
+    unsafe { out.set_len(total) };
+    out
 }
 
 /// The triangles of each slab, in increasing index (a counting sort by slab).

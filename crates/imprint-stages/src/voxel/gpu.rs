@@ -73,7 +73,12 @@ impl GpuBoundary {
         }
         let mut dense = vec![[0f32; 4]; spec.len()];
         let mut owner = vec![NONE; spec.len()];
-        for (k, (&c, &p)) in boundary.cells.iter().zip(&boundary.points).enumerate() {
+        for (k, (&c, &p)) in boundary
+            .cells
+            .iter()
+            .zip(boundary.points.iter())
+            .enumerate()
+        {
             let slot = dense
                 .get_mut(c as usize)
                 .ok_or_else(|| Error::Invalid(format!("boundary cell {c} is outside its grid")))?;
@@ -88,7 +93,7 @@ impl GpuBoundary {
             points: ctx.storage_buffer("boundary points", &dense)?,
             owner: ctx.storage_buffer("boundary owners", &owner)?,
             faces: ctx.storage_buffer("boundary faces", &faces_in_grid(&spec, &boundary.faces))?,
-            faces_world: Arc::new(boundary.faces.clone()),
+            faces_world: boundary.faces.clone(),
             inside: match &boundary.inside {
                 Some(words) => Some(ctx.storage_buffer("boundary inside", words)?),
                 None => None,
@@ -121,7 +126,7 @@ impl GpuBoundary {
             Some(b) => {
                 let mut words: Vec<u32> = ctx.read_buffer(b)?;
                 words.truncate(self.spec.len().div_ceil(32));
-                Some(words)
+                Some(Arc::new(words))
             }
             None => None,
         };
@@ -129,8 +134,8 @@ impl GpuBoundary {
             spec: self.spec,
             variant: self.variant,
             cells,
-            points,
-            faces,
+            points: Arc::new(points),
+            faces: Arc::new(faces),
             inside,
         })
     }
