@@ -71,6 +71,28 @@ impl FarBricks {
         (x >> BRICK_LOG2) + bx * (y >> BRICK_LOG2) + bxy * (z >> BRICK_LOG2)
     }
 
+    /// Per lane, all ones where every cell a read based at cell `(x[m], y[m], z[m])` (within
+    /// the grid) touches is plainly far, else zero: lane masks, the lanes' blocks found side by
+    /// side and looked up with no bounds check each (a branch per lane, with its index
+    /// arithmetic, was most of a far test the cloth makes for every particle and substep).
+    #[inline(always)]
+    pub fn far_lanes<const N: usize>(&self, [x, y, z]: &[[i32; N]; 3]) -> [u32; N] {
+        let mut far = [0u32; N];
+        // No blocks (a default value): nothing is known to be far.
+        let Some(last) = self.near.len().checked_sub(1) else {
+            return far;
+        };
+        let mut block = [0u32; N];
+        for m in 0..N {
+            block[m] = self.block([x[m] as u32, y[m] as u32, z[m] as u32]);
+        }
+        for m in 0..N {
+            // Cells within the grid have their block in `near`: the clamp changes none.
+            far[m] = 0u32.wrapping_sub(!self.near[(block[m] as usize).min(last)] as u32);
+        }
+        far
+    }
+
     /// Whether every cell a read based in block `b` ([`FarBricks::block`]) touches is plainly
     /// far.
     #[inline(always)]
@@ -86,4 +108,42 @@ pub fn not_far_span(row: &[Vec4], far_cell: Vec4) -> Option<Range<usize>> {
     let lo = row.iter().position(|c| bits(c) != far)?;
     let hi = row.iter().rposition(|c| bits(c) != far)?;
     Some(lo..hi + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lanes' masks say what [`FarBricks::all_far`] says of each lane's cell, for cells
+    /// all over a grid whose sides are not whole blocks; a default value knows nothing far.
+    #[test]
+    fn far_lanes_is_all_far_lane_by_lane() {
+        let dims = UVec3::new(13, 9, 18);
+        // A band through a few rows: near blocks around them, far ones elsewhere.
+        let rows = (0..dims.y * dims.z).map(|r| match r % 23 {
+            0 => Some(2..5),
+            7 => Some(9..13),
+            _ => None,
+        });
+        let bricks = FarBricks::from_rows(dims, rows);
+        let mut seed = 5u32;
+        let mut next = |n: u32| {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            ((seed >> 8) % n) as i32
+        };
+        let (mut far, mut near) = (0, 0);
+        for _ in 0..500 {
+            let cells: [[i32; 8]; 3] =
+                [dims.x, dims.y, dims.z].map(|d| std::array::from_fn(|_| next(d)));
+            let got = bricks.far_lanes(&cells);
+            for m in 0..8 {
+                let base = [0, 1, 2].map(|a| cells[a][m] as usize);
+                let want = bricks.all_far(base);
+                assert_eq!(got[m], if want { u32::MAX } else { 0 }, "{base:?}");
+                (far, near) = (far + want as u32, near + !want as u32);
+            }
+        }
+        assert!(far > 100 && near > 100, "{far} far, {near} near");
+        assert_eq!(FarBricks::default().far_lanes(&[[0; 8]; 3]), [0; 8]);
+    }
 }

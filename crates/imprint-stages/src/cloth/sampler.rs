@@ -207,22 +207,16 @@ impl<'a> FieldView<'a> {
     #[allow(clippy::needless_range_loop)]
     pub fn lanes_far(&self, c: &CellLanes) -> bool {
         let dims = self.dims.to_array().map(|d| d as f32);
-        // Lane masks: off the grid by a cell or more (`read` gives the far sample), and the
-        // brick of each lane's cell (`i` is clamped to the grid, so in bounds for every lane).
-        let (mut off, mut block) = ([0u32; LANES], [0u32; LANES]);
+        // Lane masks: off the grid by a cell or more (`read` gives the far sample), and in a
+        // far brick (`i` is clamped to the grid, so every lane has one).
+        let mut off = [0u32; LANES];
         for a in 0..3 {
             for m in 0..LANES {
                 let out = (c.b[a][m] < -1.0) | (c.b[a][m] >= dims[a]);
                 off[m] |= mask(out);
             }
         }
-        for m in 0..LANES {
-            block[m] = self.far_bricks.block([0, 1, 2].map(|a| c.i[a][m] as u32));
-        }
-        let mut far = [0u32; LANES];
-        for m in 0..LANES {
-            far[m] = mask(self.far_bricks.far_block(block[m]));
-        }
+        let mut far = self.far_bricks.far_lanes(&c.i);
         for m in 0..LANES {
             far[m] = off[m] | (c.inner[m] & far[m]);
         }
