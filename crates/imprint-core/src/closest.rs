@@ -34,8 +34,9 @@ pub struct Pairs {
 }
 
 /// What [`Pairs::closest`] gives per lane: the closest point `q` and `|q - p|²`. The
-/// kernel writes it in place (it was copied out of a struct of its own, 512 bytes through
-/// `memcpy` for every 32 pairs, a twentieth of the field refinement's time).
+/// kernel writes it in the caller's (returned by value, it was built in a struct of its own
+/// and copied out: 512 bytes through `memcpy` for every 32 pairs, 1.3% of a one-thread field
+/// build's samples).
 #[derive(Default)]
 pub struct Closest {
     pub q: [Lanes; 3],
