@@ -33,10 +33,10 @@ pub struct Pairs {
     tri: [[Lanes; 3]; 3],
 }
 
-/// What [`Pairs::closest`] gives per lane: the closest point `q` and `|q - p|²`. The
-/// kernel writes it in the caller's (returned by value, it was built in a struct of its own
-/// and copied out: 512 bytes through `memcpy` for every 32 pairs, 1.3% of a one-thread field
-/// build's samples).
+/// What [`Pairs::closest`] gives per lane: the closest point `q` and `|q - p|²`, written into
+/// a value the caller keeps. Returned by value, it was built in a struct of its own and
+/// copied out: 512 bytes through `memcpy` for every 32 pairs, 1.3% of a one-thread field
+/// build's samples.
 #[derive(Default)]
 pub struct Closest {
     pub q: [Lanes; 3],

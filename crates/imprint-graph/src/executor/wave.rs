@@ -90,8 +90,8 @@ impl Executor {
                 .warnings
                 .push(format!("node '{}': {w}", slot.name));
         }
-        let checked = job.own.as_ref();
-        let step = match result.and_then(|step| finite(step, checked, &slot.name, frame)) {
+        let before = job.own.as_ref();
+        let step = match result.and_then(|step| finite(step, before, &slot.name, frame)) {
             Ok(step) => step,
             Err(e) => {
                 // The last good value stays, for a viewer that goes on after the error.

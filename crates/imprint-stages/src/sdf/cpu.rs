@@ -611,14 +611,14 @@ fn keep_better(
     pairs.set_triangles(faces, cands);
     pairs.closest(out);
     let d2 = &out.d2;
-    let mut out = ([0.0f32; LANES], [0u32; LANES]);
+    let mut kept = ([0.0f32; LANES], [0u32; LANES]);
     for l in 0..LANES {
         let (d, o, n) = (best.0[l], best.1[l], cands[l]);
         let better = (d2[l] < d) | ((d2[l] == d) & (n < o));
-        out.0[l] = if better { d2[l] } else { d };
-        out.1[l] = if better { n } else { o };
+        kept.0[l] = if better { d2[l] } else { d };
+        kept.1[l] = if better { n } else { o };
     }
-    out
+    kept
 }
 
 /// What [`splat_slab`] needs of a slab of layers `z0..z1` and the band.
