@@ -207,7 +207,8 @@ pub struct ClothSim {
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: SideMemory,
     /// Per block of [`LANES`] particles and collider, the cells its end and start fields
-    /// were last read at (kept through a frame's substeps, whose fields do not change).
+    /// were last read at (kept through a frame's substeps, whose fields do not change, and
+    /// read again by the frame pass after them).
     #[serde(skip)]
     corners: Vec<[Corners; 2]>,
     stats: Vec<SubstepStats>,
@@ -563,7 +564,8 @@ impl ClothSim {
                 span: b.span,
             })
             .collect();
-        self.run_frame(&colliders, depth, frame, dt_frame)
+        // A parallel pass per substep: from a worker (see `on_workers`).
+        imprint_core::pool::on_workers(|| self.run_frame(&colliders, depth, frame, dt_frame))
     }
 
     /// The substeps of one frame, against colliders ready to sample.
@@ -597,10 +599,7 @@ impl ClothSim {
         self.lanes.resize(n);
         self.lanes_prev.resize(n);
         self.lanes_next.resize(n);
-        // Whole chunks of blocks per collider; nothing held from the last frame's fields.
-        let corners = n.div_ceil(CHUNK) * (CHUNK / LANES) * colliders.len().max(1);
-        self.corners.resize_with(corners, Default::default);
-        self.corners.iter_mut().flatten().for_each(Corners::forget);
+        self.forget_corners(colliders.len());
         self.inv_mass.clear();
         self.inv_mass.resize(n.div_ceil(LANES) * LANES, 0.0);
         self.free.clear();
@@ -651,6 +650,14 @@ impl ClothSim {
         }
         self.gpu_kinetic = None;
         Ok(self.metrics(frame, dt, colliders, depth, &frame_stats, &last))
+    }
+
+    /// Sizes the held corners for `colliders` (whole chunks of blocks per collider) and drops
+    /// what they hold: nothing held from the last frame's fields.
+    fn forget_corners(&mut self, colliders: usize) {
+        let corners = self.len().div_ceil(CHUNK) * (CHUNK / LANES) * colliders.max(1);
+        self.corners.resize_with(corners, Default::default);
+        self.corners.iter_mut().flatten().for_each(Corners::forget);
     }
 
     fn check(&self, sub: &SubstepStats, ke_limit: f64) -> std::result::Result<(), String> {
@@ -756,26 +763,35 @@ impl ClothSim {
     /// the potentials averaged over x and x_prev: the half-step pairing under which Verlet's
     /// energy error is second order, not first.
     pub fn energy(&self) -> Energy {
-        self.frame_pass(&[], &[]).energy
+        self.frame_pass(&[], &[], &mut []).energy
     }
 
     /// One pass over the particles after a frame: energies, the largest strain, and the
     /// particles still closer than ε to a collider (or the ground). Partial sums per fixed
     /// chunk, then over chunks in order, so the result does not depend on the threads.
-    fn frame_pass(&self, colliders: &[Collider], depth: &[DepthCollider]) -> FramePass {
-        let n = self.len();
-        let parts: Vec<FramePass> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut part = FramePass::default();
-                let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-                let residual = self.residual_contact(range.clone(), colliders);
-                for (i, worst) in range.zip(residual) {
-                    self.particle_pass(i, worst, depth, &mut part);
-                }
-                part
-            })
-            .collect();
+    /// `corners` are laid out as the substeps' (whole chunks of blocks per collider; none
+    /// without colliders) and hold the colliders' cells or nothing ([`Corners`]): after a
+    /// frame, the cells its last substep read, which the particles have mostly not left.
+    fn frame_pass(
+        &self,
+        colliders: &[Collider],
+        depth: &[DepthCollider],
+        corners: &mut [[Corners; 2]],
+    ) -> FramePass {
+        let chunks = self.len().div_ceil(CHUNK);
+        let parts: Vec<FramePass> = if colliders.is_empty() {
+            (0..chunks)
+                .into_par_iter()
+                .map(|c| self.chunk_pass(c, colliders, depth, &mut []))
+                .collect()
+        } else {
+            let per_chunk = CHUNK / LANES * colliders.len();
+            corners[..chunks * per_chunk]
+                .par_chunks_mut(per_chunk)
+                .enumerate()
+                .map(|(c, corners)| self.chunk_pass(c, colliders, depth, corners))
+                .collect()
+        };
         let mut total = FramePass::default();
         for p in &parts {
             total.energy.add(&p.energy);
@@ -786,11 +802,33 @@ impl ClothSim {
         total
     }
 
-    /// Per particle of `range`, how far it is inside ε of the colliders (ε minus the signed
-    /// distance, the largest over the colliders; −∞ for none), against the end-of-frame
-    /// fields: eight particles at a time where the fields are unsigned ([`contact_lanes`]),
-    /// one at a time where not.
-    fn residual_contact(&self, range: std::ops::Range<usize>, colliders: &[Collider]) -> Vec<f32> {
+    /// Chunk `c`'s part of [`ClothSim::frame_pass`], with the chunk's `corners`.
+    fn chunk_pass(
+        &self,
+        c: usize,
+        colliders: &[Collider],
+        depth: &[DepthCollider],
+        corners: &mut [[Corners; 2]],
+    ) -> FramePass {
+        let mut part = FramePass::default();
+        let range = c * CHUNK..((c + 1) * CHUNK).min(self.len());
+        let residual = self.residual_contact(range.clone(), colliders, corners);
+        for (i, worst) in range.zip(residual) {
+            self.particle_pass(i, worst, depth, &mut part);
+        }
+        part
+    }
+
+    /// Per particle of `range` (one chunk), how far it is inside ε of the colliders (ε minus
+    /// the signed distance, the largest over the colliders; −∞ for none), against the
+    /// end-of-frame fields: eight particles at a time where the fields are unsigned
+    /// ([`contact_lanes`], with the chunk's `corners`), one at a time where not.
+    fn residual_contact(
+        &self,
+        range: std::ops::Range<usize>,
+        colliders: &[Collider],
+        corners: &mut [[Corners; 2]],
+    ) -> Vec<f32> {
         let (pos, eps) = (&self.state.pos, self.params.collision.epsilon);
         let mut worst = vec![f32::NEG_INFINITY; range.len()];
         for (k, c) in colliders.iter().enumerate() {
@@ -804,7 +842,7 @@ impl ClothSim {
                 continue;
             }
             let w = c.weight(1.0);
-            let mut corners: [Corners; 2] = Default::default();
+            let nf = colliders.len();
             let fields = Fields {
                 end: &c.end,
                 start: c.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
@@ -819,7 +857,8 @@ impl ClothSim {
                     (0..3).for_each(|a| x[a][m] = pos[i][a]);
                 }
                 let side = self.side.block(b / LANES, k);
-                let found = contact_lanes::resting(fields, &x, side, eps, &mut corners);
+                let corners = &mut corners[(b - range.start) / LANES * nf + k];
+                let found = contact_lanes::resting(fields, &x, side, eps, corners);
                 for (worst, d) in worst.iter_mut().zip(found) {
                     if let Some(d) = d {
                         *worst = worst.max(eps - d);
@@ -899,6 +938,8 @@ impl ClothSim {
             .collect()
     }
 
+    /// The frame's metrics; the frame pass reads the colliders through `self.corners`, which
+    /// must hold their cells or nothing.
     fn metrics(
         &mut self,
         frame: u32,
@@ -908,7 +949,9 @@ impl ClothSim {
         frame_stats: &SubstepStats,
         last: &SubstepStats,
     ) -> ClothFrameMetrics {
-        let pass = self.frame_pass(colliders, depth);
+        let mut corners = std::mem::take(&mut self.corners);
+        let pass = self.frame_pass(colliders, depth, &mut corners);
+        self.corners = corners;
         let total = pass.energy.total();
         let first = *self.first_energy.get_or_insert(total);
         ClothFrameMetrics {
@@ -953,6 +996,7 @@ impl ClothSim {
         gpu: &GpuClothFrameMetrics,
     ) -> Result<ClothFrameMetrics> {
         let stats = self.adopt(state, side, fields_end.len(), gpu)?;
+        self.forget_corners(fields_end.len());
         let colliders: Vec<Collider> = fields_end
             .iter()
             .map(|&f| Collider {
@@ -1463,6 +1507,70 @@ fn hinge_force(i: usize, hinges: &Hinges, at: impl Fn(usize) -> Vec3) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The frame pass reads the colliders through the cells the frame's last substep held
+    /// ([`Corners`]); its residual contact must be what fresh reads give. Two spheres on one
+    /// grid, overlapping under a 20×20 cloth (two chunks): a held corner read for the wrong
+    /// collider or block would give the other sphere's distances there.
+    #[test]
+    fn the_frame_pass_reads_the_same_through_the_held_cells_as_afresh() {
+        use crate::cloth::params::StiffnessMode;
+        use glam::UVec3;
+        use imprint_core::GridSpec;
+        let mut p = ClothParams::new(
+            Shape::Grid {
+                size: [0.8, 0.8],
+                resolution: [20, 20],
+                center: Vec3::new(0.013, 0.34, 0.021),
+                normal: Vec3::Y,
+            },
+            Material::Harada {
+                k_structural: 1e4,
+                k_shear: 1e4,
+                k_bend: None,
+            },
+        );
+        (p.stiffness_mode, p.mass, p.substeps) = (StiffnessMode::Strain, 1.0, 16);
+        (p.collision.epsilon, p.collision.ground) = (0.01, None);
+        let spec = GridSpec::new(Vec3::splat(-0.395), 0.01, UVec3::splat(80)).unwrap();
+        let sphere = |c: Vec3| {
+            DistanceField::from_closest_points(spec, 3.0, move |q| {
+                c + 0.25 * (q - c).try_normalize().unwrap_or(Vec3::X)
+            })
+        };
+        let fields = [
+            sphere(Vec3::new(-0.08, 0.0, 0.0)),
+            sphere(Vec3::new(0.08, 0.0, 0.0)),
+        ];
+        let fields: Vec<&DistanceField> = fields.iter().collect();
+        let mut sim = ClothSim::from_assets(&p, &Default::default()).unwrap();
+        let mut close_frames = 0;
+        for f in 0..40 {
+            let m = sim.step_frame(&fields, &fields, f, 1.0 / 60.0).unwrap();
+            let colliders: Vec<Collider> = fields
+                .iter()
+                .map(|&f| Collider {
+                    start: None,
+                    end: FieldView::new(f),
+                    span: (1.0, 1.0),
+                })
+                .collect();
+            let mut fresh = sim.corners.clone();
+            fresh.iter_mut().flatten().for_each(Corners::forget);
+            let afresh = sim.frame_pass(&colliders, &[], &mut fresh);
+            assert_eq!(m.close, afresh.close, "frame {f}");
+            assert_eq!(
+                m.close_max_depth.to_bits(),
+                afresh.close_depth.to_bits(),
+                "frame {f}"
+            );
+            close_frames += (m.close > 0) as u32;
+        }
+        assert!(
+            close_frames > 10,
+            "the cloth must rest within ε of the spheres"
+        );
+    }
 
     /// `block_stats` without a branch per lane against the plain loop over the live lanes it
     /// replaced: the same kinetic sum and largest change to the bit, and the same first

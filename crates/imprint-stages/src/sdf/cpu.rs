@@ -109,9 +109,12 @@ impl FieldBuilder {
     }
 
     pub fn build(&mut self, boundary: &Boundary, band: f32) -> Result<DistanceField> {
-        let mut build = self.start(boundary, band)?;
-        build.run_part(0, 1);
-        Ok(build.finish(self))
+        // A dozen parallel passes: from a worker (see `on_workers`).
+        imprint_core::pool::on_workers(|| {
+            let mut build = self.start(boundary, band)?;
+            build.run_part_here(0, 1);
+            Ok(build.finish(self))
+        })
     }
 
     /// A build to run in parts (`FieldBuild::run_part`), e.g. one per frame: the same field
@@ -257,6 +260,11 @@ impl FieldBuild {
 
     /// Runs part `part` of `parts` (parts run in order, each once).
     pub fn run_part(&mut self, part: u32, parts: u32) {
+        imprint_core::pool::on_workers(|| self.run_part_here(part, parts))
+    }
+
+    /// [`FieldBuild::run_part`] on the calling thread.
+    fn run_part_here(&mut self, part: u32, parts: u32) {
         let nz = self.spec.dims.z as usize;
         let z = self.layers(part, parts);
         if z.is_empty() {

@@ -587,6 +587,18 @@ impl ParticleSkin {
         dt_frame: f32,
     ) -> Result<ParticleFrameMetrics> {
         self.check_frame_inputs(start, end, dt_frame)?;
+        // Passes in parallel per substep: from a worker (see `on_workers`).
+        imprint_core::pool::on_workers(|| self.run_frame(start, end, frame, dt_frame))
+    }
+
+    /// [`ParticleSkin::step_frame`] on checked inputs.
+    fn run_frame(
+        &mut self,
+        start: &[Affine3A],
+        end: &[Affine3A],
+        frame: u32,
+        dt_frame: f32,
+    ) -> Result<ParticleFrameMetrics> {
         let split = |m: &Affine3A| {
             let (_, r, t) = m.to_scale_rotation_translation();
             (r.normalize(), t)

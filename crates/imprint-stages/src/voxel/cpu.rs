@@ -92,6 +92,12 @@ impl Voxelizer {
     /// The discrete boundary of `mesh` on this grid. Parts of the mesh outside the grid are
     /// clipped away.
     pub fn run(&mut self, mesh: &Mesh, variant: BoundaryVariant) -> Result<Boundary> {
+        // Parallel passes: from a worker (see `on_workers`).
+        imprint_core::pool::on_workers(|| self.run_here(mesh, variant))
+    }
+
+    /// [`Voxelizer::run`] on the calling thread.
+    fn run_here(&mut self, mesh: &Mesh, variant: BoundaryVariant) -> Result<Boundary> {
         let spec = self.spec;
         let verts: Vec<Vec3> = mesh
             .positions
