@@ -997,14 +997,7 @@ impl ClothSim {
     ) -> Result<ClothFrameMetrics> {
         let stats = self.adopt(state, side, fields_end.len(), gpu)?;
         self.forget_corners(fields_end.len());
-        let colliders: Vec<Collider> = fields_end
-            .iter()
-            .map(|&f| Collider {
-                start: None,
-                end: FieldView::new(f),
-                span: (1.0, 1.0),
-            })
-            .collect();
+        let colliders = end_colliders(fields_end);
         Ok(self.metrics(gpu.frame, gpu.dt_substep, &colliders, &[], &stats, &stats))
     }
 
@@ -1091,6 +1084,19 @@ impl ClothSim {
 struct Memory<'a> {
     side: &'a mut [SideLanes],
     corners: &'a mut [[Corners; 2]],
+}
+
+/// Colliders read at their end-of-frame `fields` alone: what a frame's residual contact reads
+/// after the frame.
+fn end_colliders<'a>(fields: &[&'a DistanceField]) -> Vec<Collider<'a>> {
+    fields
+        .iter()
+        .map(|&f| Collider {
+            start: None,
+            end: FieldView::new(f),
+            span: (1.0, 1.0),
+        })
+        .collect()
 }
 
 /// One chunk of particles (`base..`, whole blocks of [`LANES`]) through one substep, their
@@ -1547,14 +1553,7 @@ mod tests {
         let mut close_frames = 0;
         for f in 0..40 {
             let m = sim.step_frame(&fields, &fields, f, 1.0 / 60.0).unwrap();
-            let colliders: Vec<Collider> = fields
-                .iter()
-                .map(|&f| Collider {
-                    start: None,
-                    end: FieldView::new(f),
-                    span: (1.0, 1.0),
-                })
-                .collect();
+            let colliders = end_colliders(&fields);
             let mut fresh = sim.corners.clone();
             fresh.iter_mut().flatten().for_each(Corners::forget);
             let afresh = sim.frame_pass(&colliders, &[], &mut fresh);

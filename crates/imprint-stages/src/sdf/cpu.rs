@@ -109,7 +109,7 @@ impl FieldBuilder {
     }
 
     pub fn build(&mut self, boundary: &Boundary, band: f32) -> Result<DistanceField> {
-        // A dozen parallel passes: from a worker (see `on_workers`).
+        // Parallel passes: from a worker (see `on_workers`).
         imprint_core::pool::on_workers(|| {
             let mut build = self.start(boundary, band)?;
             build.run_part_here(0, 1);
