@@ -1221,6 +1221,59 @@ fn skin_node_input_errors_name_the_field() {
     assert!(err.contains("method") && err.contains("substeps"), "{err}");
 }
 
+/// H's scene with the cow in place of the bunny and its field built every 4 frames,
+/// interpolated: the horns move farther between two builds than the 3-cell band, and the
+/// cloth caught on them blows up at frame 21 whatever its substeps (160 too). The error names
+/// the band misses and the band, and with the band widened beyond that motion, as it says,
+/// the same scene runs on past that frame.
+#[test]
+fn a_cloth_blown_up_by_band_misses_names_the_band_and_a_wider_band_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../pipelines/harada_cloth.ron"
+    ));
+    let run = |band: &str, frames: &str| {
+        let args = [
+            "run",
+            file.to_str().unwrap(),
+            "--out",
+            "o",
+            "--backend",
+            "cpu",
+            "--frames",
+            frames,
+            "--set",
+            "bunny.path=\"../assets/meshes/cow.obj\"",
+            "--set",
+            "field.every=4",
+            "--set",
+            "field.interpolate=true",
+            "--set",
+            band,
+            "--set",
+            "render.enabled=false",
+        ];
+        imprint(&args, dir.path())
+    };
+    let out = run("field.band=3.0", "0..24");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("node 'cloth', frame 21"), "{err}");
+    assert!(
+        err.contains("band misses") && err.contains("now 3 cells"),
+        "{err}"
+    );
+    assert!(err.contains("`every`"), "{err}");
+    let out = run("field.band=14.0", "0..30");
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// H's scene on the GPU (`harada_cloth.ron --backend gpu`, its first 3 frames): the field
 /// built on the GPU feeds the GPU cloth without coming back to the CPU. report.json counts
 /// the bytes each node moved: no field is read back, voxeliser and field read nothing back,

@@ -375,7 +375,8 @@ impl ClothStage {
                 "{n} contacts read one collider field alone because the other was far from the \
                  particle: between two fields the body moved farther than the band less ε \
                  (ε = {:.1} mm), so particles can be left inside; widen the field's `band` (to \
-                 more than ε plus a frame's motion) or build the field more often",
+                 more than ε plus the body's motion between the two fields: a frame's, or \
+                 `every` frames' for an interpolated field) or build the field more often",
                 eps * 1e3
             )
         });

@@ -25,7 +25,7 @@ use super::springs::{
     Faces, Hinges, LinkQuad, Links, SpringLaw, enumerate_springs, hinge_angle_gradient,
     hinge_energy, hinge_slope, spring_constants,
 };
-use super::stability::{self, StabilityEstimate};
+use super::stability::{self, BandMisses, StabilityEstimate};
 use super::texture::AnisotropyMap;
 use crate::drape::DepthCollider;
 use glam::{Mat4, Vec3, Vec4};
@@ -629,9 +629,13 @@ impl ClothSim {
                 // `state` still holds the frame's start; the side memory changed in place.
                 self.side.clone_from(&self.backup_side);
                 self.dt_prev = backup_dt;
-                return Err(self
-                    .stability
-                    .blow_up(&self.node, "cloth", frame, j, n_sub, dt, dt_frame, &what));
+                let bands = colliders
+                    .iter()
+                    .map(|c| (c.end.field.band, c.end.field.spec.cell));
+                let misses = BandMisses::of(frame_stats.band_misses + sub.band_misses, bands);
+                return Err(self.stability.blow_up(
+                    &self.node, "cloth", frame, j, n_sub, dt, dt_frame, &what, misses,
+                ));
             }
             // Counts add up over a substep's chunks; over the frame's substeps, `inside` is
             // the largest (particles, not particle-substeps).

@@ -43,7 +43,7 @@ use super::cpu::{ClothSim, ClothState};
 use super::params::ClothParams;
 use super::shape::ClothShape;
 use super::springs::{Faces, Hinge, LinkQuad, SpringLaw};
-use super::stability::StabilityEstimate;
+use super::stability::{BandMisses, StabilityEstimate};
 use crate::sdf::gpu::GpuField;
 use bytemuck::Zeroable;
 use glam::{Vec3, Vec4};
@@ -803,6 +803,7 @@ impl GpuCloth {
             encoder.copy_buffer_to_buffer(&self.side_backup, 0, &self.side, 0, self.side.size());
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
+            let bands = fields_end.iter().map(|f| (f.band, f.spec.cell));
             return Err(self.stability.blow_up(
                 &self.node,
                 "cloth (GPU)",
@@ -812,6 +813,7 @@ impl GpuCloth {
                 dt,
                 dt_frame,
                 &what,
+                BandMisses::of(band_misses, bands),
             ));
         }
         self.cur = cur;

@@ -43,12 +43,50 @@ pub struct StabilityEstimate {
     pub stiffest_k_over_m: f32,
 }
 
+/// The band misses of a frame that blew up: contacts that read one of the two fields they
+/// blend alone, because the body moved farther between the fields than their band. Particles
+/// the body then reaches from inside are pushed the wrong way, and that can blow a cloth up
+/// whatever its substeps: the cow under H's cloth, its field built every 4 frames and
+/// interpolated, blew up at 80 and at 160 substeps, and ran through with a band wider than its
+/// motion (14 cells). Where the misses are few they may be beside the point (H's bunny at 16
+/// substeps blew up with one miss and a 10-cell band), so the hint offers both.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BandMisses {
+    pub count: u32,
+    /// The narrowest band among the colliders: half-width in cells and in world units.
+    pub cells: f32,
+    pub width: f32,
+}
+
+impl BandMisses {
+    /// `count` misses against `colliders` (each its band in cells and its cell size), if any.
+    pub fn of(count: u32, colliders: impl Iterator<Item = (f32, f32)>) -> Option<Self> {
+        let (cells, cell) = colliders.min_by(|a, b| (a.0 * a.1).total_cmp(&(b.0 * b.1)))?;
+        (count > 0).then_some(BandMisses {
+            count,
+            cells,
+            width: cells * cell,
+        })
+    }
+
+    /// The hint's second remedy.
+    fn hint(&self) -> String {
+        format!(
+            "; or, as {} contacts this frame read one of the two fields they blend alone (band \
+             misses: the body moved farther between them than their band, now {} cells, {:.3} \
+             m), widen the field's `band` beyond that motion or build the field more often \
+             (`every`)",
+            self.count, self.cells, self.width
+        )
+    }
+}
+
 impl StabilityEstimate {
     /// The error of a blown-up frame, for both paths: `what` failed at substep `j` (from 0)
     /// of `n_sub` substeps of `dt` in a frame of `dt_frame`; the hint names the substep count
     /// (or the stiffness division) that the estimate says would hold, or, when the springs
     /// alone are within their stable step, blames contact, wind or pins and doubles the
-    /// substeps.
+    /// substeps, and names the fields' band too when the frame had band misses (`misses`).
     #[allow(clippy::too_many_arguments)]
     pub fn blow_up(
         &self,
@@ -60,6 +98,7 @@ impl StabilityEstimate {
         dt: f32,
         dt_frame: f32,
         what: &str,
+        misses: Option<BandMisses>,
     ) -> Error {
         let needed = self.substeps_for(dt_frame);
         let hint = if needed > n_sub {
@@ -73,9 +112,10 @@ impl StabilityEstimate {
             format!(
                 "substeps: {} (now {n_sub}; the springs alone are within their stable step \
                  {:.3e} s, so contact, wind or pin motion moved particles too far per substep), \
-                 or lower the colliders' or pins' speed",
+                 or lower the colliders' or pins' speed{}",
                 (2 * n_sub).max(needed),
-                self.dt_crit
+                self.dt_crit,
+                misses.map_or(String::new(), |m| m.hint())
             )
         };
         Error::Numerical {
@@ -221,5 +261,52 @@ pub fn estimate(
         omega_max: lambda.sqrt() as f32,
         stiffest_particle: stiffest,
         stiffest_k_over_m: (k_max / m) as f32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A blow-up with stable springs names the substeps, and the band as well when the
+    /// frame had band misses: the narrowest band in world units, with its cells.
+    #[test]
+    fn a_blow_up_with_band_misses_names_the_band_too() {
+        let est = StabilityEstimate {
+            dt_crit: 1e-2,
+            dt_crit_bound: 8e-3,
+            omega_max: 200.0,
+            stiffest_particle: 0,
+            stiffest_k_over_m: 1e4,
+        };
+        // 3 cells of 1 cm (3 cm) against 4 cells of 5 mm (2 cm): the second is narrower.
+        let bands = [(3.0, 0.01), (4.0, 0.005)];
+        let misses = BandMisses::of(12, bands.into_iter());
+        assert_eq!(
+            misses,
+            Some(BandMisses {
+                count: 12,
+                cells: 4.0,
+                width: 0.02
+            })
+        );
+        assert_eq!(BandMisses::of(0, bands.into_iter()), None);
+        assert_eq!(BandMisses::of(5, std::iter::empty()), None);
+        let hint = |misses| match est.blow_up("c", "cloth", 3, 1, 8, 2e-3, 1.0 / 60.0, "x", misses)
+        {
+            Error::Numerical { hint, .. } => hint,
+            other => panic!("{other}"),
+        };
+        let with = hint(misses);
+        assert!(with.contains("substeps: 16"), "{with}");
+        assert!(with.contains("12 contacts"), "{with}");
+        assert!(with.contains("now 4 cells, 0.020 m"), "{with}");
+        assert!(
+            with.contains("`band`") && with.contains("`every`"),
+            "{with}"
+        );
+        let without = hint(None);
+        assert!(without.contains("substeps: 16"), "{without}");
+        assert!(!without.contains("band"), "{without}");
     }
 }
