@@ -44,24 +44,55 @@ pub fn select(m: u32, a: f32, b: f32) -> f32 {
 }
 
 /// One bit per lane of a lane mask (bit `m` set where lane `m`'s mask is all ones), from
-/// the masks' top bits (in the AVX2 build: a shift per lane and an OR across them, no branch).
+/// the masks' top bits. On x86-64, two SSE2 `movmskps` (baseline, so inlined in every build):
+/// the compiler turned the loop into a shift and an OR per lane, 8% of the cloth's contact.
 #[inline(always)]
 pub fn lane_bits(mask: &[u32; LANES]) -> u32 {
-    let mut bits = 0;
-    for (m, &k) in mask.iter().enumerate() {
-        bits |= (k >> 31) << m;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_loadu_ps, _mm_movemask_ps};
+        let at = mask.as_ptr().cast::<f32>();
+        // SAFETY: SSE2 is part of x86-64; `mask` holds eight 32-bit values, read as two
+        // unaligned groups of four (the sign bit of a float is the top bit of its word).
+        unsafe {
+            let (lo, hi) = (_mm_loadu_ps(at), _mm_loadu_ps(at.add(4)));
+            (_mm_movemask_ps(lo) | _mm_movemask_ps(hi) << 4) as u32
+        }
     }
-    bits
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let mut bits = 0;
+        for (m, &k) in mask.iter().enumerate() {
+            bits |= (k >> 31) << m;
+        }
+        bits
+    }
 }
 
-/// One bit per lane (bit `m` set where lane `m` is true).
+/// One bit per lane (bit `m` set where lane `m` is true). On x86-64 one SSE2 `pmovmskb` of
+/// the bytes shifted to their top bits, as [`lane_bits`].
 #[inline(always)]
 pub fn bool_bits(b: &[bool; LANES]) -> u32 {
-    let mut bits = 0;
-    for (m, &b) in b.iter().enumerate() {
-        bits |= (b as u32) << m;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cvtsi64_si128, _mm_movemask_epi8, _mm_slli_epi16};
+        // A `bool` is the byte 0 or 1: shifted left by 7 in 16-bit lanes, each byte's 1
+        // becomes its top bit and no bit crosses into the next byte.
+        // SAFETY: SSE2 is part of x86-64; eight `bool`s are eight initialised bytes.
+        unsafe {
+            let bytes = b.as_ptr().cast::<i64>().read_unaligned();
+            let top = _mm_slli_epi16::<7>(_mm_cvtsi64_si128(bytes));
+            _mm_movemask_epi8(top) as u32
+        }
     }
-    bits
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let mut bits = 0;
+        for (m, &b) in b.iter().enumerate() {
+            bits |= (b as u32) << m;
+        }
+        bits
+    }
 }
 
 /// The lanes whose bits are set, in increasing order: for loops over the few lanes that
@@ -478,6 +509,28 @@ pub mod quads {
                 _mm_storeu_ps(at[k], _mm256_castps256_ps128(t));
                 _mm_storeu_ps(at[k + 4], _mm256_extractf128_ps::<1>(t));
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The SSE2 reads give the lanes' bits as the loops over the lanes define them, for every
+    /// pattern of eight lanes, and `lane_bits` reads only each word's top bit.
+    #[test]
+    fn the_bits_are_the_lanes_in_order() {
+        for pattern in 0u32..256 {
+            let on = |m: usize| pattern >> m & 1 == 1;
+            let b: [bool; LANES] = std::array::from_fn(on);
+            assert_eq!(bool_bits(&b), pattern);
+            assert_eq!(lane_bits(&b.map(mask)), pattern);
+            // Other low bits do not count: only the top one.
+            let words = std::array::from_fn(|m| if on(m) { 0x8000_0001 } else { 0x7fff_ffff });
+            assert_eq!(lane_bits(&words), pattern);
+            let set: Vec<usize> = lanes_of(pattern).collect();
+            assert_eq!(set, (0..LANES).filter(|&m| on(m)).collect::<Vec<_>>());
         }
     }
 }

@@ -1372,10 +1372,10 @@ fn touch_block(
     let nf = ctx.nf();
     let side = &mut memory.side[k0 / LANES * nf + c];
     let t = Touch {
-        x: *x,
-        from: *from,
-        side: *side,
-        live: *live,
+        x,
+        from,
+        side,
+        live,
     };
     let w = collider.weight(ctx.s);
     let fields = Fields {
@@ -1383,7 +1383,7 @@ fn touch_block(
         start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
     let corners = &mut memory.corners[k0 / LANES * nf + c];
-    let r = contact_lanes::touch(fields, &t, ctx.eps, ctx.friction, corners);
+    let r = contact_lanes::touch_lanes(fields, &t, ctx.eps, ctx.friction, corners);
     // The positions are the old where there was no hit.
     *x = r.x;
     *side = r.side;

@@ -150,7 +150,9 @@ macro_rules! forces_simd {
             let axes = [at.x.as_ptr(), at.y.as_ptr(), at.z.as_ptr()];
             for quad in slots.chunks_exact(4) {
                 for (l, slot) in quad.iter().enumerate() {
-                    // SAFETY: in bounds (the assertion above), the run's eight as the gathered.
+                    // SAFETY: in bounds (the assertion above), the run's eight as the gathered;
+                    // `Blocks::build`, which alone makes slots, gives each a gather index
+                    // within `others` and a constants one within `constants`.
                     let o = unsafe {
                         if slot.run != u32::MAX {
                             let o = slot.run as usize;
@@ -158,12 +160,13 @@ macro_rules! forces_simd {
                         } else {
                             // One gather per axis: eight loads and stores into lanes and a load
                             // back were the springs' costliest line (at 64², the edges).
-                            let ends = &self.others[slot.other as usize];
+                            let ends = self.others.get_unchecked(slot.other as usize);
                             let i = _mm256_loadu_si256(ends.as_ptr().cast());
                             axes.map(|a| _mm256_i32gather_ps::<4>(a, i))
                         }
                     };
-                    let consts = &self.constants[slot.constants as usize];
+                    // SAFETY: as above.
+                    let consts = unsafe { self.constants.get_unchecked(slot.constants as usize) };
                     // (No `array::map` here: its closures are not inlined into AVX2 code.)
                     let d = [
                         _mm256_sub_ps(o[0], p[0]),

@@ -63,14 +63,15 @@ impl Corners {
 /// both [`FieldView::lanes_far`] and [`FieldView::sample_lanes`].
 #[derive(Clone, Copy, Debug)]
 pub struct CellLanes {
-    /// The coordinates' floor (exact below 2^24, as `cell_coords`).
-    b: [[f32; LANES]; 3],
-    /// The same clamped to the grid, as integers (where `inner`, the floor itself).
+    /// The coordinates' floor (exact below 2^24, as `cell_coords`) clamped to the grid, as integers (where `inner`, the floor itself).
     i: [[i32; LANES]; 3],
     /// The fraction within the cell.
     t: [[f32; LANES]; 3],
     /// All ones where all eight cells of a read are in the grid, else zero (a lane mask).
     inner: [u32; LANES],
+    /// All ones where the floor is off the grid by a cell or more (`read` gives the far
+    /// sample), else zero.
+    off: [u32; LANES],
 }
 
 /// A sample and, for a signed field, the blend of the cells' signed distances
@@ -203,28 +204,17 @@ impl<'a> FieldView<'a> {
     /// read has no vector and is not in the band, so no contact can come of it; this costs
     /// a few operations per lane, where [`FieldView::sample_lanes`] loads eight cells.
     #[inline(always)]
-    // A lane indexes the cells and the masks alike.
-    #[allow(clippy::needless_range_loop)]
     pub fn lanes_far(&self, c: &CellLanes) -> bool {
-        let dims = self.dims.to_array().map(|d| d as f32);
-        // Lane masks: off the grid by a cell or more (`read` gives the far sample), and in a
-        // far brick (`i` is clamped to the grid, so every lane has one).
-        let mut off = [0u32; LANES];
-        for a in 0..3 {
-            for m in 0..LANES {
-                let out = (c.b[a][m] < -1.0) | (c.b[a][m] >= dims[a]);
-                off[m] |= mask(out);
-            }
-        }
-        let mut far = self.far_bricks.far_lanes(&c.i);
-        for m in 0..LANES {
-            far[m] = off[m] | (c.inner[m] & far[m]);
-        }
-        lane_bits(&far) == (1 << LANES) - 1
+        // Lanes off the grid are far; of the others, one at the grid's edge is not
+        // (`read_outside` blends real cells), and the rest are far in far bricks (`i` is
+        // clamped to the grid, so every lane has one).
+        let on = !lane_bits(&c.off) & ((1 << LANES) - 1);
+        on & !lane_bits(&c.inner) == 0 && self.far_bricks.all_far_lanes(&c.i, on)
     }
 
     /// The lanes' cells (`p[axis][lane]`): their coordinates' floor (exact below 2^24, as
-    /// `cell_coords`), the fraction, and whether all eight cells of a read are in the grid.
+    /// `cell_coords`), the fraction, whether all eight cells of a read are in the grid, and
+    /// whether the floor is off it by a cell or more.
     #[inline(always)]
     // A lane indexes the positions and every output alike.
     #[allow(clippy::needless_range_loop)]
@@ -233,21 +223,21 @@ impl<'a> FieldView<'a> {
         let (origin, cell) = (spec.origin.to_array(), spec.cell);
         let dims = self.dims.to_array().map(|d| d as f32);
         let mut c = CellLanes {
-            b: [[0.0; LANES]; 3],
             i: [[0; LANES]; 3],
             t: [[0.0; LANES]; 3],
             inner: [0; LANES],
+            off: [0; LANES],
         };
         // Per axis, then combined: `inner &= mask` in the loop below compiled to a masked
         // store, which on AMD processors takes many cycles.
-        let mut inside = [[0u32; LANES]; 3];
+        let (mut inside, mut off) = ([[0u32; LANES]; 3], [[0u32; LANES]; 3]);
         for a in 0..3 {
             for m in 0..LANES {
                 let x = (p[a][m] - origin[a]) / cell;
                 let b = x.floor();
-                c.b[a][m] = b;
                 c.t[a][m] = x - b;
                 inside[a][m] = mask((b >= 0.0) & (b + 1.0 < dims[a]));
+                off[a][m] = mask((b < -1.0) | (b >= dims[a]));
                 // SAFETY: clamped to [0, dims − 1] (NaN to 0 by `max`), which an i32 holds:
                 // the plain conversion, which saturates, is one scalar call per lane.
                 c.i[a][m] = unsafe { b.max(0.0).min(dims[a] - 1.0).to_int_unchecked::<i32>() };
@@ -255,6 +245,7 @@ impl<'a> FieldView<'a> {
         }
         for m in 0..LANES {
             c.inner[m] = inside[0][m] & inside[1][m] & inside[2][m];
+            c.off[m] = off[0][m] | off[1][m] | off[2][m];
         }
         c
     }
