@@ -14,7 +14,7 @@
 use super::contact::{self, Collider, Hit};
 use super::contact_lanes::{self, Fields, Touch};
 use super::lanes::{
-    Blocks, LANES, Lane, Lanes, bool_bits, lane_bits, lane_vec, lanes_of, mask, select,
+    Blocks, ForcesFn, LANES, Lane, Lanes, bool_bits, lane_bits, lane_vec, lanes_of, mask, select,
 };
 use super::metrics::{ClothFrameMetrics, Energy, GpuClothFrameMetrics};
 use super::params::{ClothParams, Material, Shape};
@@ -131,8 +131,10 @@ struct FramePass {
 
 /// Everything a particle's update reads, for one substep.
 struct Substep<'a> {
-    /// The springs by blocks of eight particles.
+    /// The springs by blocks of eight particles, and the build of their forces this
+    /// processor runs ([`Blocks::forces_fn`]).
     blocks: &'a Blocks,
+    forces: ForcesFn,
     /// The positions at the substep's start and the substep before, and the inverse masses
     /// (padded to whole blocks).
     at: &'a Lanes,
@@ -700,6 +702,7 @@ impl ClothSim {
         };
         let ctx = Substep {
             blocks: &self.blocks,
+            forces: Blocks::forces_fn(),
             at: &self.lanes,
             prev: &self.lanes_prev,
             inv_mass: &self.inv_mass,
@@ -1170,7 +1173,8 @@ fn step_block(
     let block = |a: &[f32]| -> Lane { a[first..first + LANES].try_into().expect("a block") };
     let x = [block(&ctx.at.x), block(&ctx.at.y), block(&ctx.at.z)];
     let xp = [block(&ctx.prev.x), block(&ctx.prev.y), block(&ctx.prev.z)];
-    let (mut f, over) = ctx.blocks.forces(first / LANES, ctx.at, ctx.max_stretch);
+    // SAFETY: `forces_fn` picked a build this processor runs.
+    let (mut f, over) = unsafe { (ctx.forces)(ctx.blocks, first / LANES, ctx.at, ctx.max_stretch) };
     if over != 0 {
         st.overstretched = st
             .overstretched

@@ -76,6 +76,9 @@ pub struct Blocks {
     constants: Vec<Constants>,
 }
 
+/// A build of the spring forces on a block ([`Blocks::forces_fn`]).
+pub type ForcesFn = unsafe fn(&Blocks, usize, &Lanes, f32) -> ([Lane; 3], u32);
+
 /// Particle positions as structure of arrays, padded to a whole number of blocks.
 #[derive(Clone, Debug, Default)]
 pub struct Lanes {
@@ -118,7 +121,7 @@ fn load8(a: &[f32], at: usize) -> std::arch::x86_64::__m256 {
 
 /// Defines `$name`, [`Blocks::forces_by`] in AVX2 instructions compiled with `$features`
 /// enabled: the AVX2 build, and the same instructions with AVX-512's 32 registers (one body,
-/// two builds; `forces` picks).
+/// two builds; `forces_fn` picks).
 #[cfg(target_arch = "x86_64")]
 macro_rules! forces_simd {
     ($(#[$doc:meta])* $name:ident, $features:literal) => {
@@ -278,31 +281,33 @@ impl Blocks {
         self.particles == n && self.offsets.len() == n.div_ceil(LANES) + 1
     }
 
-    /// The spring forces on block `b`'s particles (x, y, z, lane by lane), and a bit per
-    /// lane whose particle has a spring longer than `max_stretch` times its rest length.
-    /// AVX2 instructions where the processor has them (decided once per process), the same
-    /// bits either way.
+    /// The build of the spring forces this processor runs, picked once (a substep takes it
+    /// for all its blocks; checked per block, the features were 1% of the cloth's
+    /// instructions). The function gives the spring forces on block `b`'s particles (x, y,
+    /// z, lane by lane), and a bit per lane whose particle has a spring longer than
+    /// `max_stretch` times its rest length: AVX2 instructions where the processor has them,
+    /// the same bits either way.
     ///
     /// Where it also has AVX-512 (F and VL), the same AVX2 instructions are compiled for it:
     /// its 32 vector registers hold the twelve accumulators that spill from AVX2's 16 (the
     /// instructions that address the stack fell from 83 to 41, and the springs' time against
     /// the rest of the substep by about a fifth).
-    #[inline(always)]
-    pub fn forces(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([Lane; 3], u32) {
+    ///
+    /// Calling the function is safe on this processor (it is why it was picked): `unsafe`
+    /// only because the AVX builds are.
+    pub fn forces_fn() -> ForcesFn {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512vl") {
-            // SAFETY: the CPU has AVX-512F and VL (checked just above), and so AVX2.
-            return unsafe { self.forces_avx512(b, at, max_stretch) };
+            return Blocks::forces_avx512;
         }
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
-            return unsafe { self.forces_avx2(b, at, max_stretch) };
+            return Blocks::forces_avx2;
         }
-        self.forces_portable(b, at, max_stretch)
+        |blocks, b, at, max_stretch| blocks.forces_portable(b, at, max_stretch)
     }
 
-    /// [`Blocks::forces`] in plain Rust.
+    /// The spring forces ([`Blocks::forces_fn`]) in plain Rust.
     #[inline(always)]
     fn forces_portable(&self, b: usize, at: &Lanes, max_stretch: f32) -> ([Lane; 3], u32) {
         if self.law == SpringLaw::Quadratic {
@@ -329,7 +334,7 @@ impl Blocks {
         "avx2,avx512f,avx512vl"
     );
 
-    /// [`Blocks::forces`]; `QUAD` picks T eq. 1's law. A block's slots come four to a quad,
+    /// The spring forces ([`Blocks::forces_fn`]); `QUAD` picks T eq. 1's law. A block's slots come four to a quad,
     /// spring `l` of each quad into accumulator `l`; the loops over the lanes vectorise.
     #[inline(always)]
     fn forces_by<const QUAD: bool>(
@@ -437,7 +442,7 @@ mod tests {
 
     type Build = unsafe fn(&Blocks, usize, &Lanes, f32) -> ([Lane; 3], u32);
 
-    /// The builds of [`Blocks::forces`] this processor can run.
+    /// The builds of the spring forces this processor can run.
     fn builds() -> Vec<Build> {
         let mut builds: Vec<Build> = vec![|s, b, at, max| s.forces_portable(b, at, max)];
         #[cfg(target_arch = "x86_64")]
