@@ -60,11 +60,10 @@ pub struct Fields<'a> {
     pub start: Option<(&'a FieldView<'a>, f32)>,
 }
 
-/// Reads the body at the lanes' new positions and responds, as
-/// [`super::contact::signed_sample`] and then [`super::contact::respond`] do one particle at
-/// a time. `corners` holds the lanes' cells of the `end` and `start` fields from the last
-/// read of these fields ([`Corners`]). In the AVX2 build where the processor has it; the
-/// cloth's update, compiled for AVX2 already, takes [`touch_lanes`] into its own build.
+/// [`touch_lanes`] in the AVX2 build where the processor has it: what the tests hold to the
+/// plain build and to one particle at a time (the cloth's update, compiled for AVX2 already,
+/// takes `touch_lanes` into its own build).
+#[cfg(test)]
 #[inline]
 pub fn touch(f: Fields, t: &Touch, eps: f32, friction: f32, corners: &mut [Corners; 2]) -> Touched {
     #[cfg(target_arch = "x86_64")]
@@ -76,7 +75,7 @@ pub fn touch(f: Fields, t: &Touch, eps: f32, friction: f32, corners: &mut [Corne
 }
 
 /// [`touch_lanes`] compiled for AVX2: the same operations, eight lanes per instruction.
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(test, target_arch = "x86_64"))]
 #[target_feature(enable = "avx2")]
 unsafe fn touch_avx2(
     f: Fields,
@@ -92,9 +91,13 @@ unsafe fn touch_avx2(
 /// the outward direction.
 type Signed = (bool, f32, [f32; 3]);
 
-/// [`touch`] in the caller's build: inlined into the cloth's AVX2 update, it spares a call
+/// Reads the body at the lanes' new positions and responds, as
+/// [`super::contact::signed_sample`] and then [`super::contact::respond`] do one particle at
+/// a time, in the caller's build: inlined into the cloth's AVX2 update, which spares a call
 /// per block, the copies of its arguments and result through memory, and a feature check
-/// (together with `lane_bits`' `movmskps`, 4% of the 128² cloth's instructions).
+/// (with `lane_bits`' `movmskps`, 4% of the 128² cloth's instructions). `corners` holds the
+/// lanes' cells of the `end` and `start` fields from the last read of these fields
+/// ([`Corners`]).
 #[inline(always)]
 pub(super) fn touch_lanes(
     f: Fields,
@@ -271,7 +274,8 @@ fn turned_motion(
 
 /// The signed distance [`super::contact::signed_sample`] gives at each lane's position `x`
 /// with no motion (`from` = `x`), remembering `side` (xyz, w = 1 when known): what the check
-/// at a frame's end reads; `None` where there is no sample. `corners` as for [`touch`].
+/// at a frame's end reads; `None` where there is no sample. `corners` holds the lanes' cells
+/// ([`Corners`]).
 #[inline]
 pub fn resting(
     f: Fields,
@@ -433,9 +437,6 @@ mod tests {
         })
     }
 
-    /// Eight random particles about a sphere of radius `r`: in the band on both sides, at
-    /// its edge, far, in the grid's outermost cells and off it (every fourth `round`), with
-    /// and without a memory, some pinned.
     /// A [`Touch`]'s arrays, owned.
     #[derive(Clone, Copy, Default)]
     struct Lanes8 {
@@ -456,6 +457,9 @@ mod tests {
         }
     }
 
+    /// Eight random particles about a sphere of radius `r`: in the band on both sides, at
+    /// its edge, far, in the grid's outermost cells and off it (every fourth `round`), with
+    /// and without a memory, some pinned.
     fn particles(rng: &mut u64, r: f32, round: usize) -> Lanes8 {
         let mut t = Lanes8::default();
         for m in 0..LANES {

@@ -334,8 +334,9 @@ impl Blocks {
         "avx2,avx512f,avx512vl"
     );
 
-    /// The spring forces ([`Blocks::forces_fn`]); `QUAD` picks T eq. 1's law. A block's slots come four to a quad,
-    /// spring `l` of each quad into accumulator `l`; the loops over the lanes vectorise.
+    /// The spring forces ([`Blocks::forces_fn`]); `QUAD` picks T eq. 1's law. A block's
+    /// slots come four to a quad, spring `l` of each quad into accumulator `l`; the loops
+    /// over the lanes vectorise.
     #[inline(always)]
     fn forces_by<const QUAD: bool>(
         &self,
@@ -440,11 +441,9 @@ mod tests {
     use crate::cloth::{ClothParams, ClothSim, Material, Shape, StiffnessMode};
     use glam::Vec3;
 
-    type Build = unsafe fn(&Blocks, usize, &Lanes, f32) -> ([Lane; 3], u32);
-
     /// The builds of the spring forces this processor can run.
-    fn builds() -> Vec<Build> {
-        let mut builds: Vec<Build> = vec![|s, b, at, max| s.forces_portable(b, at, max)];
+    fn builds() -> Vec<ForcesFn> {
+        let mut builds: Vec<ForcesFn> = vec![|s, b, at, max| s.forces_portable(b, at, max)];
         #[cfg(target_arch = "x86_64")]
         {
             if std::is_x86_feature_detected!("avx2") {

@@ -63,7 +63,8 @@ impl Corners {
 /// both [`FieldView::lanes_far`] and [`FieldView::sample_lanes`].
 #[derive(Clone, Copy, Debug)]
 pub struct CellLanes {
-    /// The coordinates' floor (exact below 2^24, as `cell_coords`) clamped to the grid, as integers (where `inner`, the floor itself).
+    /// The coordinates' floor (exact below 2^24, as `cell_coords`) clamped to the grid, as
+    /// integers (where `inner`, the floor itself).
     i: [[i32; LANES]; 3],
     /// The fraction within the cell.
     t: [[f32; LANES]; 3],
