@@ -120,6 +120,15 @@ impl SubstepStats {
     }
 }
 
+/// The springs as the frame pass reads them: by blocks, at the positions of the frame's end
+/// and of the substep before, in lanes.
+#[derive(Clone, Copy)]
+struct SpringsAt<'a> {
+    blocks: &'a Blocks,
+    pos: &'a Lanes,
+    prev: &'a Lanes,
+}
+
 /// What the pass after a frame sums (see `ClothSim::frame_pass`).
 #[derive(Clone, Copy, Debug, Default)]
 struct FramePass {
@@ -595,28 +604,18 @@ impl ClothSim {
                 + (scale / dt_frame as f64).powi(2));
         let ke_limit = self.params.limits.energy_growth as f64 * ke_start.max(energy_scale);
         let n = self.len();
-        if !self.blocks.fits(n) {
-            self.blocks = Blocks::build(&self.links, n);
-        }
-        self.lanes.resize(n);
-        self.lanes_prev.resize(n);
+        self.sync_lanes();
         self.lanes_next.resize(n);
         self.forget_corners(colliders.len());
         self.inv_mass.clear();
         self.inv_mass.resize(n.div_ceil(LANES) * LANES, 0.0);
+        for (w, p) in self.inv_mass.iter_mut().zip(&self.state.pos) {
+            *w = p.w;
+        }
         self.free.clear();
         self.free
             .extend(self.pin_slot.iter().map(|&s| s == u32::MAX));
         self.free.resize(n.div_ceil(LANES) * LANES, false);
-        for (i, (p, q)) in self.state.pos.iter().zip(&self.state.prev).enumerate() {
-            (self.lanes.x[i], self.lanes.y[i], self.lanes.z[i]) = (p.x, p.y, p.z);
-            (
-                self.lanes_prev.x[i],
-                self.lanes_prev.y[i],
-                self.lanes_prev.z[i],
-            ) = (q.x, q.y, q.z);
-            self.inv_mass[i] = p.w;
-        }
 
         let mut frame_stats = SubstepStats::new();
         let mut last = SubstepStats::new();
@@ -656,6 +655,28 @@ impl ClothSim {
         }
         self.gpu_kinetic = None;
         Ok(self.metrics(frame, dt, colliders, depth, &frame_stats, &last))
+    }
+
+    /// The substeps' and the frame pass's views of the state: the springs' blocks built for
+    /// this cloth, and the positions and those of the substep before in lanes. A frame
+    /// keeps them as it steps; anything else that sets the state calls this before they are
+    /// read.
+    fn sync_lanes(&mut self) {
+        if !self.blocks.fits(self.len()) {
+            self.blocks = Blocks::build(&self.links, self.len());
+        }
+        self.lanes.set_from(&self.state.pos);
+        self.lanes_prev.set_from(&self.state.prev);
+    }
+
+    /// The springs at the lanes' positions (which [`ClothSim::sync_lanes`] or a frame
+    /// keeps as the state's).
+    fn springs_at(&self) -> SpringsAt<'_> {
+        SpringsAt {
+            blocks: &self.blocks,
+            pos: &self.lanes,
+            prev: &self.lanes_prev,
+        }
     }
 
     /// Sizes the held corners for `colliders` (whole chunks of blocks per collider) and drops
@@ -770,7 +791,22 @@ impl ClothSim {
     /// the potentials averaged over x and x_prev: the half-step pairing under which Verlet's
     /// energy error is second order, not first.
     pub fn energy(&self) -> Energy {
-        self.frame_pass(&[], &[], &mut []).energy
+        let (mut pos, mut prev) = (Lanes::default(), Lanes::default());
+        pos.set_from(&self.state.pos);
+        prev.set_from(&self.state.prev);
+        let built;
+        let blocks = if self.blocks.fits(self.len()) {
+            &self.blocks
+        } else {
+            built = Blocks::build(&self.links, self.len());
+            &built
+        };
+        let springs = SpringsAt {
+            blocks,
+            pos: &pos,
+            prev: &prev,
+        };
+        self.frame_pass(springs, &[], &[], &mut []).energy
     }
 
     /// One pass over the particles after a frame: energies, the largest strain, and the
@@ -781,6 +817,7 @@ impl ClothSim {
     /// frame, the cells its last substep read, which the particles have mostly not left.
     fn frame_pass(
         &self,
+        springs: SpringsAt,
         colliders: &[Collider],
         depth: &[DepthCollider],
         corners: &mut [[Corners; 2]],
@@ -789,14 +826,14 @@ impl ClothSim {
         let parts: Vec<FramePass> = if colliders.is_empty() {
             (0..chunks)
                 .into_par_iter()
-                .map(|c| self.chunk_pass(c, colliders, depth, &mut []))
+                .map(|c| self.chunk_pass(c, springs, colliders, depth, &mut []))
                 .collect()
         } else {
             let per_chunk = CHUNK / LANES * colliders.len();
             corners[..chunks * per_chunk]
                 .par_chunks_mut(per_chunk)
                 .enumerate()
-                .map(|(c, corners)| self.chunk_pass(c, colliders, depth, corners))
+                .map(|(c, corners)| self.chunk_pass(c, springs, colliders, depth, corners))
                 .collect()
         };
         let mut total = FramePass::default();
@@ -813,6 +850,7 @@ impl ClothSim {
     fn chunk_pass(
         &self,
         c: usize,
+        springs: SpringsAt,
         colliders: &[Collider],
         depth: &[DepthCollider],
         corners: &mut [[Corners; 2]],
@@ -820,8 +858,14 @@ impl ClothSim {
         let mut part = FramePass::default();
         let range = c * CHUNK..((c + 1) * CHUNK).min(self.len());
         let residual = self.residual_contact(range.clone(), colliders, corners);
-        for (i, worst) in range.zip(residual) {
-            self.particle_pass(i, worst, depth, &mut part);
+        for (block, worst) in range.step_by(LANES).zip(residual.chunks(LANES)) {
+            let b = block / LANES;
+            let (u_pos, strain) = springs.blocks.energy(b, springs.pos, true);
+            let (u_prev, _) = springs.blocks.energy(b, springs.prev, false);
+            for (m, &worst) in worst.iter().enumerate() {
+                let energy = (u_pos[m], u_prev[m], strain[m]);
+                self.particle_pass(block + m, energy, worst, depth, &mut part);
+            }
         }
         part
     }
@@ -876,18 +920,18 @@ impl ClothSim {
         worst
     }
 
-    /// One particle's part of [`ClothSim::frame_pass`]; `worst` is its
-    /// [`ClothSim::residual_contact`].
+    /// One particle's part of [`ClothSim::frame_pass`]: `springs` its springs' half energy
+    /// at the frame's end and a substep before, and their largest strain
+    /// ([`Blocks::energy`]); `worst` its [`ClothSim::residual_contact`].
     fn particle_pass(
         &self,
         i: usize,
+        (u_pos, u_prev, strain): (f32, f32, f32),
         mut worst: f32,
         depth: &[DepthCollider],
         part: &mut FramePass,
     ) {
         let (pos, prev) = (&self.state.pos, &self.state.prev);
-        let (u_pos, strain) = spring_energy(i, &self.links, pos);
-        let (u_prev, _) = spring_energy(i, &self.links, prev);
         part.energy.springs += 0.5 * (u_pos + u_prev) as f64;
         part.strain = part.strain.max(strain);
         let h = &self.hinges;
@@ -957,7 +1001,7 @@ impl ClothSim {
         last: &SubstepStats,
     ) -> ClothFrameMetrics {
         let mut corners = std::mem::take(&mut self.corners);
-        let pass = self.frame_pass(colliders, depth, &mut corners);
+        let pass = self.frame_pass(self.springs_at(), colliders, depth, &mut corners);
         self.corners = corners;
         let total = pass.energy.total();
         let first = *self.first_energy.get_or_insert(total);
@@ -1053,6 +1097,7 @@ impl ClothSim {
                 ))
             })?;
         self.state = state;
+        self.sync_lanes();
         self.side = blocks;
         self.dt_prev = Some(gpu.dt_substep);
         // What else the GPU cloth carries into its next frame: the pins start from their
@@ -1472,9 +1517,10 @@ fn spring_force<const QUAD: bool>(
 }
 
 /// Half the potential energy of particle `i`'s springs (each is listed at both ends) and the
-/// largest |length / rest - 1| among them, four springs per step.
-#[inline]
-fn spring_energy(i: usize, links: &Links, pos: &[Vec4]) -> (f32, f32) {
+/// largest |length / rest - 1| among them, four springs per step: what [`Blocks::energy`]
+/// gives eight particles at a time, to the bit.
+#[cfg(test)]
+pub(super) fn spring_energy(i: usize, links: &Links, pos: &[Vec4]) -> (f32, f32) {
     let xi = pos[i];
     let (px, py, pz) = (Vec4::splat(xi.x), Vec4::splat(xi.y), Vec4::splat(xi.z));
     let quad = links.law == SpringLaw::Quadratic;
@@ -1564,7 +1610,7 @@ mod tests {
             let colliders = end_colliders(&fields);
             let mut fresh = sim.corners.clone();
             fresh.iter_mut().flatten().for_each(Corners::forget);
-            let afresh = sim.frame_pass(&colliders, &[], &mut fresh);
+            let afresh = sim.frame_pass(sim.springs_at(), &colliders, &[], &mut fresh);
             assert_eq!(m.close, afresh.close, "frame {f}");
             assert_eq!(
                 m.close_max_depth.to_bits(),

@@ -16,7 +16,7 @@
 //! too, so a slot's other ends are one load per axis (a *run*), not eight.
 
 use super::springs::{LinkQuad, Links, SpringLaw};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use std::collections::HashMap;
 
 pub use imprint_core::lanes::{
@@ -92,6 +92,14 @@ impl Lanes {
     #[inline(always)]
     pub fn get(&self, i: usize) -> Vec3 {
         Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
+    /// The xyz of `points` (padded as [`Lanes::resize`] pads).
+    pub fn set_from(&mut self, points: &[Vec4]) {
+        self.resize(points.len());
+        for (i, p) in points.iter().enumerate() {
+            (self.x[i], self.y[i], self.z[i]) = (p.x, p.y, p.z);
+        }
     }
 
     /// The first `n` rounded up to [`LANES`], zero beyond `n`.
@@ -372,6 +380,98 @@ impl Blocks {
     }
 }
 
+impl Blocks {
+    /// Half the potential energy of block `b`'s particles' springs at `at` (each spring is
+    /// listed at both ends) and the largest |length / rest − 1| among them, lane by lane: what
+    /// the frame pass measures, with the bits of the per-particle reference (`cpu`'s
+    /// `spring_energy`, four springs per step and a horizontal sum). Compiled for AVX2
+    /// where the processor has it (the same operations, so the same bits): one particle at a
+    /// time, its gathers of `Vec4` positions made the energy a seventh of the springs' cost
+    /// over a frame's 32 substeps, though it is measured once per frame.
+    ///
+    /// Without `strain` the strains are left at zero, and cost nothing: a division per
+    /// spring, which takes as long as eight lanes at once or four (AVX2 divides in two
+    /// halves on AMD's Zen 4), so that the energy is bound by its square roots and divisions.
+    pub fn energy(&self, b: usize, at: &Lanes, strain: bool) -> (Lane, Lane) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.energy_avx2(b, at, strain) };
+        }
+        self.energy_portable(b, at, strain)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn energy_avx2(&self, b: usize, at: &Lanes, strain: bool) -> (Lane, Lane) {
+        self.energy_portable(b, at, strain)
+    }
+
+    #[inline(always)]
+    fn energy_portable(&self, b: usize, at: &Lanes, strain: bool) -> (Lane, Lane) {
+        match (self.law == SpringLaw::Quadratic, strain) {
+            (true, true) => self.energy_by::<true, true>(b, at),
+            (true, false) => self.energy_by::<true, false>(b, at),
+            (false, true) => self.energy_by::<false, true>(b, at),
+            (false, false) => self.energy_by::<false, false>(b, at),
+        }
+    }
+
+    /// [`Blocks::energy`]; `QUAD` picks T eq. 1's law. Spring `l` of each quad goes into
+    /// accumulator `l`, summed as `(u0 + u1) + (u2 + u3)` and maxed as `max(max(s0, s2),
+    /// max(s1, s3))` (SSE's horizontal sum and maximum, which the reference takes);
+    /// `max` is SSE's (the second operand when either is NaN) throughout. Padding slots
+    /// (rest and constants 0) add +0 to a sum that is never −0, and a strain of 0.
+    #[inline(always)]
+    // A lane indexes the positions, constants and sums alike.
+    #[allow(clippy::needless_range_loop)]
+    fn energy_by<const QUAD: bool, const STRAIN: bool>(
+        &self,
+        b: usize,
+        at: &Lanes,
+    ) -> (Lane, Lane) {
+        let sse_max = |a: f32, b: f32| if a > b { a } else { b };
+        let first = b * LANES;
+        let p = [load(&at.x, first), load(&at.y, first), load(&at.z, first)];
+        let (mut u, mut strain) = ([[0.0f32; LANES]; 4], [[0.0f32; LANES]; 4]);
+        let slots = &self.slots[self.offsets[b] as usize..self.offsets[b + 1] as usize];
+        for quad in slots.chunks_exact(4) {
+            for (l, slot) in quad.iter().enumerate() {
+                let o = self.other_ends(slot, at);
+                let c = &self.constants[slot.constants as usize];
+                for m in 0..LANES {
+                    let d = [o[0][m] - p[0][m], o[1][m] - p[1][m], o[2][m] - p[2][m]];
+                    let e = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() - c.rest[m];
+                    let k = if e >= 0.0 {
+                        c.k_stretch[m]
+                    } else {
+                        c.k_compress[m]
+                    };
+                    u[l][m] += if QUAD {
+                        k * e.abs() * e * e * (0.5 / 3.0)
+                    } else {
+                        k * e * e * 0.25
+                    };
+                    if STRAIN {
+                        let s = e.abs() / sse_max(c.rest[m], TINY);
+                        strain[l][m] = sse_max(strain[l][m], s);
+                    }
+                }
+            }
+        }
+        let (mut u_sum, mut worst) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for m in 0..LANES {
+            u_sum[m] = (u[0][m] + u[1][m]) + (u[2][m] + u[3][m]);
+            let (a, b) = (
+                sse_max(strain[0][m], strain[2][m]),
+                sse_max(strain[1][m], strain[3][m]),
+            );
+            worst[m] = sse_max(a, b);
+        }
+        (u_sum, worst)
+    }
+}
+
 /// One slot's springs, lane by lane: the force's factor along the spring and the spring's
 /// vector (so the force is factor times vector); sets `over` where a spring is longer than
 /// `max_stretch` times its rest length. One operation at a time over the lanes, each a loop
@@ -457,11 +557,10 @@ mod tests {
         builds
     }
 
-    /// The blocks give the per-particle forces ([`ClothSim::forces`]) to the bit, on a grid
-    /// whose rows do not fill whole blocks, for both laws, with the particles jostled, in
-    /// every build.
-    #[test]
-    fn same_bits_as_one_particle_at_a_time() {
+    /// A grid whose rows do not fill whole blocks, with its particles jostled, for each
+    /// law: the cloth, its positions in lanes and as points.
+    fn jostled_grids() -> Vec<(ClothSim, Lanes, Vec<Vec3>)> {
+        let mut grids = Vec::new();
         for (material, mode) in [
             (
                 Material::Harada {
@@ -503,12 +602,23 @@ mod tests {
                 })
                 .collect();
             sim.set_positions(&jostled).unwrap();
-            let blocks = Blocks::build(sim.links(), n);
             let mut at = Lanes::default();
             at.resize(n);
             for (i, p) in jostled.iter().enumerate() {
                 (at.x[i], at.y[i], at.z[i]) = (p.x, p.y, p.z);
             }
+            grids.push((sim, at, jostled));
+        }
+        grids
+    }
+
+    /// The blocks give the per-particle forces ([`ClothSim::forces`]) to the bit, on
+    /// [`jostled_grids`], in every build.
+    #[test]
+    fn same_bits_as_one_particle_at_a_time() {
+        for (sim, at, _) in jostled_grids() {
+            let n = sim.len();
+            let blocks = Blocks::build(sim.links(), n);
             let want = sim.forces();
             // Every build the processor can run: plain Rust, AVX2 and AVX-512 (the
             // dispatcher picks only the widest).
@@ -531,6 +641,44 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The blocks give the per-particle springs' energy and strain (`spring_energy`, the
+    /// frame pass's reference) to the bit, on [`jostled_grids`] (stretched and compressed
+    /// springs), in both builds.
+    #[test]
+    fn energy_same_bits_as_one_particle_at_a_time() {
+        for (sim, at, points) in jostled_grids() {
+            let n = sim.len();
+            let blocks = Blocks::build(sim.links(), n);
+            let pos: Vec<Vec4> = points.iter().map(|p| p.extend(1.0)).collect();
+            let mut strained = 0;
+            for b in 0..n.div_ceil(LANES) {
+                let mut builds = vec![blocks.energy_portable(b, &at, true)];
+                #[cfg(target_arch = "x86_64")]
+                if std::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU has AVX2 (checked just above).
+                    builds.push(unsafe { blocks.energy_avx2(b, &at, true) });
+                }
+                // Without the strains, the same energy.
+                let (u_alone, no_strain) = blocks.energy(b, &at, false);
+                assert_eq!(no_strain, [0.0; LANES]);
+                assert_eq!(u_alone.map(f32::to_bits), builds[0].0.map(f32::to_bits));
+                for (u, strain) in builds {
+                    for m in 0..LANES.min(n - b * LANES) {
+                        let i = b * LANES + m;
+                        let want = crate::cloth::cpu::spring_energy(i, sim.links(), &pos);
+                        assert_eq!(
+                            (u[m].to_bits(), strain[m].to_bits()),
+                            (want.0.to_bits(), want.1.to_bits()),
+                            "particle {i}"
+                        );
+                        strained += (want.0 > 0.0 && want.1 > 0.0) as u32;
+                    }
+                }
+            }
+            assert!(strained as usize > n, "{strained} of {n}");
         }
     }
 }
