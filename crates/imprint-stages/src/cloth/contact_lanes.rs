@@ -65,7 +65,13 @@ pub struct Fields<'a> {
 /// takes `touch_lanes` into its own build).
 #[cfg(test)]
 #[inline]
-pub fn touch(f: Fields, t: &Touch, eps: f32, friction: f32, corners: &mut [Corners; 2]) -> Touched {
+pub fn touch(
+    f: Fields,
+    t: &Touch,
+    eps: f32,
+    friction: f32,
+    corners: &mut [Corners; 2],
+) -> Option<Touched> {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked just above).
@@ -83,7 +89,7 @@ unsafe fn touch_avx2(
     eps: f32,
     friction: f32,
     corners: &mut [Corners; 2],
-) -> Touched {
+) -> Option<Touched> {
     touch_lanes(f, t, eps, friction, corners)
 }
 
@@ -97,7 +103,8 @@ type Signed = (bool, f32, [f32; 3]);
 /// per block, the copies of its arguments and result through memory, and a feature check
 /// (with `lane_bits`' `movmskps`, 4% of the 128² cloth's instructions). `corners` holds the
 /// lanes' cells of the `end` and `start` fields from the last read of these fields
-/// ([`Corners`]).
+/// ([`Corners`]). `None` where no lane has a sample (every lane far from the body): the
+/// positions and memories stay as they are, and nothing is copied.
 #[inline(always)]
 pub(super) fn touch_lanes(
     f: Fields,
@@ -105,20 +112,13 @@ pub(super) fn touch_lanes(
     eps: f32,
     friction: f32,
     corners: &mut [Corners; 2],
-) -> Touched {
-    let Some(SignedLanes {
+) -> Option<Touched> {
+    let SignedLanes {
         some,
         distance,
         outward,
         miss,
-    }) = signed_lanes(f, t, eps, corners)
-    else {
-        return Touched {
-            x: *t.x,
-            side: *t.side,
-            ..Default::default()
-        };
-    };
+    } = signed_lanes(f, t, eps, corners)?;
     // Every lane pushed, then each lane's new position and memory selected in a loop of
     // their own ([`select`]): selected in this loop, they compiled to masked stores, which
     // on AMD processors take many cycles.
@@ -154,14 +154,14 @@ pub(super) fn touch_lanes(
         }
         side[3][m] = select(read[m], 1.0, t.side[3][m]);
     }
-    Touched {
+    Some(Touched {
         x: x_out,
         side,
         hit,
         inside,
         depth,
         band_miss,
-    }
+    })
 }
 
 /// The lanes' samples read as signed ([`super::contact::signed_sample`]'s bits): whether
@@ -480,6 +480,16 @@ mod tests {
         t
     }
 
+    /// What [`touch`] did, with `None` (no lane near the body) as its meaning: every lane
+    /// unchanged, no hit.
+    fn or_unchanged(r: Option<Touched>, t: &Touch) -> Touched {
+        r.unwrap_or(Touched {
+            x: *t.x,
+            side: *t.side,
+            ..Default::default()
+        })
+    }
+
     /// Checks `lanes` against the per-particle sample and response of `collider` at frame
     /// fraction `s`; returns (hits, particles found inside, band misses).
     /// [`resting`] gives `signed_sample`'s distance at each lane's position with no motion,
@@ -570,7 +580,7 @@ mod tests {
                 let mut owned = first;
                 owned.x.iter_mut().flatten().for_each(|x| *x += nudge);
                 let t = owned.touch();
-                let lanes = touch(fields, &t, eps, friction, &mut kept);
+                let lanes = or_unchanged(touch(fields, &t, eps, friction, &mut kept), &t);
                 let (d, v, in_band) =
                     view.sample_lanes(t.x, &view.cell_lanes(t.x), &mut Corners::default());
                 for m in 0..LANES {
@@ -584,6 +594,7 @@ mod tests {
                     assert_eq!(in_band[m], f.in_band);
                 }
                 let plain = touch_lanes(fields, &t, eps, friction, &mut Default::default());
+                let plain = or_unchanged(plain, &t);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
                 (hits, inside) = (hits + h, inside + i);
@@ -625,8 +636,9 @@ mod tests {
                     end: &vb,
                     start: Some((&va, s)),
                 };
-                let lanes = touch(fields, &t, eps, friction, &mut kept);
+                let lanes = or_unchanged(touch(fields, &t, eps, friction, &mut kept), &t);
                 let plain = touch_lanes(fields, &t, eps, friction, &mut Default::default());
+                let plain = or_unchanged(plain, &t);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
                 (hits, inside, misses) = (hits + h, inside + i, misses + b);

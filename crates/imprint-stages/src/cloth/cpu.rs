@@ -1432,7 +1432,9 @@ fn touch_block(
         start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
     let corners = &mut memory.corners[k0 / LANES * nf + c];
-    let r = contact_lanes::touch_lanes(fields, &t, ctx.eps, ctx.friction, corners);
+    let Some(r) = contact_lanes::touch_lanes(fields, &t, ctx.eps, ctx.friction, corners) else {
+        return;
+    };
     // The positions are the old where there was no hit.
     *x = r.x;
     *side = r.side;
