@@ -920,9 +920,9 @@ impl ClothSim {
         worst
     }
 
-    /// One particle's part of [`ClothSim::frame_pass`]: `springs` its springs' half energy
-    /// at the frame's end and a substep before, and their largest strain
-    /// ([`Blocks::energy`]); `worst` its [`ClothSim::residual_contact`].
+    /// One particle's part of [`ClothSim::frame_pass`]: `(u_pos, u_prev, strain)` its
+    /// springs' half energy at the frame's end and a substep before, and their largest
+    /// strain ([`Blocks::energy`]); `worst` its [`ClothSim::residual_contact`].
     fn particle_pass(
         &self,
         i: usize,
