@@ -272,14 +272,19 @@ impl DistanceField {
                 .map(|mut s| s.take())
                 .unwrap_or(None);
             let spare = spare.filter(|s| s.buf.len() == spec.len() && s.far == far);
+            let far_cell = Vec4::new(0.0, 0.0, 0.0, -far);
+            // A built field's band spans say where its cells can differ from far, so a fresh
+            // buffer of far cells takes them as a spare would.
             let (mut out, fresh) = match spare {
                 Some(s) => (s.buf, false),
-                None => (vec![Vec4::ZERO; spec.len()], true),
+                None if self.cells.far_exact && self.cells.spans.is_some() => {
+                    (crate::pool::grid_vec(spec.len(), far_cell), false)
+                }
+                None => (crate::pool::grid_vec(spec.len(), Vec4::ZERO), true),
             };
             let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
             // Written into a spare, only the band cells differ from far; fresh, any may: each
             // plane's rows are scanned for them while the plane is in cache.
-            let far_cell = Vec4::new(0.0, 0.0, 0.0, -far);
             let scanned: Vec<Vec<_>> = out
                 .par_chunks_mut(nx * ny)
                 .enumerate()

@@ -3,6 +3,7 @@
 //! worth once, not a buffer per task per frame (a fresh buffer of a few hundred KiB is
 //! fresh pages, a fault each). The voxeliser's slab keys and the field's slab distances.
 
+use rayon::prelude::*;
 use std::sync::Mutex;
 
 /// Free buffers of one kind; what a buffer holds when taken is whatever it was given back
@@ -33,6 +34,24 @@ impl<T> Pool<T> {
             f.push(item);
         }
     }
+}
+
+/// `n` copies of `value` in a grid-sized buffer, written by the pool's threads: a fresh
+/// buffer's first touches are page faults (on the 2-core VM of BENCHMARKS a 128³ field's
+/// 32 MiB of cells took 16 ms of them on one thread), and split over the threads they cost
+/// a fraction. The values are those of `vec![value; n]`.
+pub fn grid_vec<T: Copy + Send + Sync>(n: usize, value: T) -> Vec<T> {
+    /// Elements per task: 256 KiB of them, so that a 128³ grid's faults spread over the
+    /// threads.
+    const CHUNK_BYTES: usize = 256 << 10;
+    let mut v = Vec::with_capacity(n);
+    let chunk = (CHUNK_BYTES / size_of::<T>().max(1)).max(1);
+    v.spare_capacity_mut()[..n]
+        .par_chunks_mut(chunk)
+        .for_each(|c| c.iter_mut().for_each(|x| _ = x.write(value)));
+    // SAFETY: the first `n` slots (within the capacity) were all written just above.
+    unsafe { v.set_len(n) };
+    v
 }
 
 /// Runs `f` on one of rayon's worker threads, so that the parallel passes inside it start
@@ -66,6 +85,17 @@ mod tests {
             let here = rayon::current_thread_index();
             assert_eq!(on_workers(rayon::current_thread_index), here);
         });
+    }
+
+    /// Every slot written, with the value given, at sizes below, at and past a task's chunk
+    /// and a huge page, and of a type whose size does not divide them.
+    #[test]
+    fn grid_vec_is_vec_of_copies() {
+        for n in [0, 1, 65_535, 65_536, 65_537, 3 << 20] {
+            assert_eq!(grid_vec(n, 7u32), vec![7u32; n], "n = {n}");
+        }
+        let odd = [1.5f32, -2.0, 3.25];
+        assert_eq!(grid_vec(100_003, odd), vec![odd; 100_003]);
     }
 
     #[test]

@@ -24,7 +24,7 @@ use imprint_core::cache::prefetch;
 use imprint_core::closest::{Closest, LANES, Pairs};
 use imprint_core::field::{LazyCells, SpareCells, band_span};
 use imprint_core::geom::{ceil_i, floor_i};
-use imprint_core::pool::Pool;
+use imprint_core::pool::{Pool, grid_vec};
 use imprint_core::{Boundary, BoundaryVariant, DistanceField, Error, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -70,11 +70,10 @@ struct Recycled<T> {
     spans: Option<Spans>,
 }
 
-impl<T: Copy + PartialEq + Default> Recycled<T> {
+impl<T: Copy + PartialEq + Send + Sync> Recycled<T> {
     /// A buffer of `n` cells, `rows` rows, to be cleaned to `clean`, and the spans to clean
     /// when they are known for that value and grid (else every cell is cleaned). A fresh
-    /// buffer is zeroed lazily by the system (its pages are first touched by the build's
-    /// parallel cleaning).
+    /// buffer is made clean ([`grid_vec`], filled in parallel), so no span needs cleaning.
     fn take(this: Option<Self>, clean: T, n: usize, rows: usize) -> (Vec<T>, Option<Spans>) {
         let Some(Recycled {
             mut buf,
@@ -82,7 +81,7 @@ impl<T: Copy + PartialEq + Default> Recycled<T> {
             spans,
         }) = this
         else {
-            return (vec![T::default(); n], None);
+            return (grid_vec(n, clean), Some(vec![[0, 0]; rows].into()));
         };
         let spans = spans.filter(|s| buf.len() == n && was == clean && s.len() == rows);
         buf.resize(n, clean);

@@ -113,22 +113,30 @@ impl Voxelizer {
             variant,
         };
         let nz = spec.dims.z as usize;
-        let pool = &self.pool;
-        let parts: Vec<BoundaryPart> = (0..nz.div_ceil(SLAB_LAYERS))
-            .into_par_iter()
-            .map(|slab| {
-                let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
-                let mut scratch = pool.take(|| SlabScratch::new(nxy));
-                let part = slab_task(&scene, bins.of(slab), z, &mut scratch);
-                pool.give(scratch);
-                part
-            })
-            .collect();
+        let (pool, closed, signed) = (&self.pool, &mut self.closed, self.signed);
+        // The sign beside the surface cells: the closedness test is one thread's work (a
+        // new mesh's; a kept one's is remembered), which the other thread's slabs overlap.
+        let (parts, inside) = rayon::join(
+            || {
+                (0..nz.div_ceil(SLAB_LAYERS))
+                    .into_par_iter()
+                    .map(|slab| {
+                        let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
+                        let mut scratch = pool.take(|| SlabScratch::new(nxy));
+                        let part = slab_task(&scene, bins.of(slab), z, &mut scratch);
+                        pool.give(scratch);
+                        part
+                    })
+                    .collect::<Vec<BoundaryPart>>()
+            },
+            || {
+                (signed && closed.is_closed(mesh))
+                    .then(|| Arc::new(super::solid::inside_cells(&spec, &verts, &mesh.triangles)))
+            },
+        );
         let cells = concat(&parts, |p| &p.0);
         let points = concat(&parts, |p| &p.1);
         let faces = concat(&parts, |p| &p.2);
-        let inside = (self.signed && self.closed.is_closed(mesh))
-            .then(|| Arc::new(super::solid::inside_cells(&spec, &verts, &mesh.triangles)));
         Ok(Boundary {
             spec,
             variant,
