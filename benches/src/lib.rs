@@ -107,9 +107,9 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
          Open3D: `RaycastingScene` exact distance on imprint's band cells (BVH build included). \
          Imprint **steady** = voxelise + field with the buffers of the frame before (table 1, \
          Closest variant: a frame-by-frame run); **one-shot** = a new `Voxelizer` and \
-         `FieldBuilder` per call (every buffer allocated, the mesh's closedness tested), median \
-         of {repeat} in this warm process, timed just before the baselines: the footing of \
-         OpenVDB's median. Ratios are baseline time / imprint time. Errors in cells against \
+         `FieldBuilder` per call (every buffer allocated, the mesh's closedness tested; freed \
+         after the timer, as the script frees OpenVDB's grids), median of {repeat} in this \
+         warm process, timed just before the baselines: the footing of OpenVDB's median. Ratios are baseline time / imprint time. Errors in cells against \
          the exact distance on imprint's band cells.\n"
     );
     let _ = writeln!(
@@ -202,12 +202,20 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
 }
 
 /// Voxelise + field of `mesh` on `spec` with nothing kept between calls (a new voxeliser and
-/// field builder each time, as a one-shot `imprint field` has), median of `repeat`, ms.
+/// field builder each time, as a one-shot `imprint field` has), median of `repeat`, ms. Each
+/// call's field is freed after its timer stops, as `baselines.py` frees OpenVDB's grids.
 fn one_shot_ms(mesh: &Mesh, spec: &GridSpec, band: f32, repeat: usize) -> f64 {
-    median_ms(repeat, || {
-        let boundary = voxelize_cpu(mesh, spec, BoundaryVariant::Closest).expect("voxelise");
-        std::hint::black_box(build_field_cpu(&boundary, band).expect("field"));
-    })
+    let times = (0..repeat.max(1))
+        .map(|_| {
+            let s = Instant::now();
+            let boundary = voxelize_cpu(mesh, spec, BoundaryVariant::Closest).expect("voxelise");
+            let field = build_field_cpu(&boundary, band).expect("field");
+            let ms = s.elapsed().as_secs_f64() * 1e3;
+            drop(std::hint::black_box((boundary, field)));
+            ms
+        })
+        .collect();
+    median(times)
 }
 
 /// GPU voxelise + field times (wall clock around submit and wait) when an adapter exists, with
