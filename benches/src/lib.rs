@@ -109,8 +109,9 @@ pub fn baselines(root: &Path, ours: &[(&str, f64, Mesh, DistanceField)], repeat:
          Closest variant: a frame-by-frame run); **one-shot** = a new `Voxelizer` and \
          `FieldBuilder` per call (every buffer allocated, the mesh's closedness tested; freed \
          after the timer, as the script frees OpenVDB's grids), median of {repeat} in this \
-         warm process, timed just before the baselines: the footing of OpenVDB's median. Ratios are baseline time / imprint time. Errors in cells against \
-         the exact distance on imprint's band cells.\n"
+         warm process, timed just before the baselines: the footing of OpenVDB's median. \
+         Ratios are baseline time / imprint time. Errors in cells against the exact distance \
+         on imprint's band cells.\n"
     );
     let _ = writeln!(
         s,

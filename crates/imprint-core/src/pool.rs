@@ -88,7 +88,7 @@ mod tests {
     }
 
     /// Every slot written, with the value given, at sizes below, at and past a task's chunk
-    /// and a huge page, and of a type whose size does not divide them.
+    /// and over many chunks, and of a type whose size does not divide a chunk's bytes.
     #[test]
     fn grid_vec_is_vec_of_copies() {
         for n in [0, 1, 65_535, 65_536, 65_537, 3 << 20] {

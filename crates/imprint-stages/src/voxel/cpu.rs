@@ -118,16 +118,15 @@ impl Voxelizer {
         // new mesh's; a kept one's is remembered), which the other thread's slabs overlap.
         let (parts, inside) = rayon::join(
             || {
-                (0..nz.div_ceil(SLAB_LAYERS))
-                    .into_par_iter()
-                    .map(|slab| {
-                        let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
-                        let mut scratch = pool.take(|| SlabScratch::new(nxy));
-                        let part = slab_task(&scene, bins.of(slab), z, &mut scratch);
-                        pool.give(scratch);
-                        part
-                    })
-                    .collect::<Vec<BoundaryPart>>()
+                let slab = |slab: usize| {
+                    let z = slab * SLAB_LAYERS..(slab * SLAB_LAYERS + SLAB_LAYERS).min(nz);
+                    let mut scratch = pool.take(|| SlabScratch::new(nxy));
+                    let part = slab_task(&scene, bins.of(slab), z, &mut scratch);
+                    pool.give(scratch);
+                    part
+                };
+                let slabs = 0..nz.div_ceil(SLAB_LAYERS);
+                slabs.into_par_iter().map(slab).collect::<Vec<_>>()
             },
             || {
                 (signed && closed.is_closed(mesh))
