@@ -280,7 +280,7 @@ impl DistanceField {
                 None if self.cells.far_exact && self.cells.spans.is_some() => {
                     (crate::pool::grid_vec(spec.len(), far_cell), false)
                 }
-                None => (crate::pool::grid_vec(spec.len(), Vec4::ZERO), true),
+                None => (bytemuck::zeroed_vec(spec.len()), true),
             };
             let (nx, ny) = (spec.dims.x as usize, spec.dims.y as usize);
             // Written into a spare, only the band cells differ from far; fresh, any may: each

@@ -32,6 +32,7 @@ use glam::{Mat4, Vec3, Vec4};
 use imprint_core::{DistanceField, Error, Mesh, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::path::Path;
 
 /// Particles per parallel task (and per partial sum). Fixed, so sums do not depend on the
@@ -662,11 +663,20 @@ impl ClothSim {
     /// keeps them as it steps; anything else that sets the state calls this before they are
     /// read.
     fn sync_lanes(&mut self) {
-        if !self.blocks.fits(self.len()) {
-            self.blocks = Blocks::build(&self.links, self.len());
+        if let Cow::Owned(blocks) = self.current_blocks() {
+            self.blocks = blocks;
         }
         self.lanes.set_from(&self.state.pos);
         self.lanes_prev.set_from(&self.state.prev);
+    }
+
+    /// The springs' blocks for this cloth: the kept ones, or built anew where they do not
+    /// fit it (a checkpoint leaves them empty).
+    fn current_blocks(&self) -> Cow<'_, Blocks> {
+        match self.blocks.fits(self.len()) {
+            true => Cow::Borrowed(&self.blocks),
+            false => Cow::Owned(Blocks::build(&self.links, self.len())),
+        }
     }
 
     /// The springs at the lanes' positions (which [`ClothSim::sync_lanes`] or a frame
@@ -794,15 +804,9 @@ impl ClothSim {
         let (mut pos, mut prev) = (Lanes::default(), Lanes::default());
         pos.set_from(&self.state.pos);
         prev.set_from(&self.state.prev);
-        let built;
-        let blocks = if self.blocks.fits(self.len()) {
-            &self.blocks
-        } else {
-            built = Blocks::build(&self.links, self.len());
-            &built
-        };
+        let blocks = self.current_blocks();
         let springs = SpringsAt {
-            blocks,
+            blocks: &blocks,
             pos: &pos,
             prev: &prev,
         };
