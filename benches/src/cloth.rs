@@ -116,13 +116,13 @@ struct ImprintRun {
     max_strain: f32,
     /// The one-time computation of the field's cells (`DistanceField::cells`), timed apart
     /// on a copy (when asked).
-    fill_ms: Vec<f64>,
+    cells_ms: Vec<f64>,
 }
 
 /// `field` None: the same cloth with no collider (springs and integration only: it falls).
-/// `measure_fills`: also time, apart and outside `total_ms`, the cache fill of each frame
-/// (this makes the run itself slower: use it on the untimed warm-up run).
-fn run_imprint(n: u32, field: Option<&DistanceField>, measure_fills: bool) -> ImprintRun {
+/// `measure_cells`: also time, apart and outside `total_ms`, the computation of each field's
+/// cells on a copy (use it on the untimed warm-up run).
+fn run_imprint(n: u32, field: Option<&DistanceField>, measure_cells: bool) -> ImprintRun {
     let params = comparison_params(n);
     let mut sim = ClothSim::from_assets(&params, &Default::default()).expect("cloth");
     if let Some(w) = sim.stability().warning(SUBSTEPS, 1.0 / FPS) {
@@ -131,10 +131,10 @@ fn run_imprint(n: u32, field: Option<&DistanceField>, measure_fills: bool) -> Im
     let mut frame_ms = Vec::with_capacity(FRAMES as usize);
     let (mut inside, mut close, mut strain) = (0u32, 0f32, 0f32);
     let fields: Vec<&DistanceField> = field.into_iter().collect();
-    let fill_ms: Vec<f64> = fields
+    let cells_ms: Vec<f64> = fields
         .iter()
-        .filter(|_| measure_fills)
-        .map(|f| time_cells(f))
+        .filter(|_| measure_cells)
+        .map(|f| time_cells(f.spec.dims.x))
         .collect();
     let mut total_ms = 0.0;
     for f in 0..FRAMES {
@@ -161,16 +161,17 @@ fn run_imprint(n: u32, field: Option<&DistanceField>, measure_fills: bool) -> Im
         inside,
         close_max_depth: close,
         max_strain: strain,
-        fill_ms,
+        cells_ms,
     }
 }
 
 /// Times [`DistanceField::cells`], the per-cell vectors the cloth reads, computed once per
-/// field (on a copy, whose cells start empty), ms.
-fn time_cells(field: &DistanceField) -> f64 {
-    let copy = field.clone();
+/// field: on the sphere's field at `res`³ built afresh (a copy would not know its band spans,
+/// and would compute every cell), ms.
+fn time_cells(res: u32) -> f64 {
+    let fresh = sphere_field(res);
     let t = Instant::now();
-    std::hint::black_box(copy.cells());
+    std::hint::black_box(fresh.cells());
     t.elapsed().as_secs_f64() * 1e3
 }
 
@@ -242,9 +243,9 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
          (1 s). Imprint reads the sphere from an exact distance field over \
          [−{FIELD_HALF}, {FIELD_HALF}]³ (**field** {FIELD_RES}³ cells of {:.2} mm, the \
          benchmark; {}³ cells of {:.2} mm to show what the field's size costs), band \
-         {FIELD_BAND} cells, built once outside the timing (the sphere does not move; \
-         `step_frame` still caches the field's cells around the cloth every frame, inside the \
-         timing). Taichi (`ti.init(arch=ti.cpu)`, `benches/compare/cloth_taichi.py`, one \
+         {FIELD_BAND} cells, built once outside the timing, as are its per-cell vectors \
+         (`DistanceField::cells`, computed on the field's first read, in the warm-up run, and \
+         kept with it: the sphere does not move). Taichi (`ti.init(arch=ti.cpu)`, `benches/compare/cloth_taichi.py`, one \
          kernel call per substep) tests the analytic sphere with the same projection and \
          friction (imprint's `contact::respond`). **ms/frame** = total time of the {FRAMES} \
          frames / {FRAMES}, median of {runs} runs after one warm-up run (imprint) or after one \
@@ -306,14 +307,11 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
             let ours = median(totals);
             let ours_frame = median(r.frame_ms.clone());
             eprintln!("cloth: imprint N = {n}, field {res}³: {ours:.2} ms/frame");
-            let once = warm.fill_ms.iter().sum::<f64>();
-            let fill = once / FRAMES as f64;
-            let rest = ours - free - fill;
+            let once = warm.cells_ms.iter().sum::<f64>();
+            let rest = ours - free;
             breakdown.push(format!(
-                "N = {n}, field {res}³: the field's cells {once:.1} ms once ({fill:.2} ms per \
-                 frame over the run, {:.0}% of it), which leaves {rest:.2} ms ({:.0} ns per \
-                 particle-substep) for reading the field and the contact response",
-                100.0 * fill / ours,
+                "N = {n}, field {res}³: {rest:.2} ms ({:.1} ns per particle-substep) for reading \
+                 the field and the contact response; the field's cells {once:.1} ms once",
                 rest * 1e6 / particle_substeps
             ));
             let (t_cols, ratio, t_h, dh, t_gap) = match &taichi {
@@ -371,8 +369,8 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
     let _ = writeln!(
         s,
         "\nWhere imprint's time goes: the same cloth with no collider (median of {runs} runs), \
-         and the per-cell vectors the cloth reads (`DistanceField::cells`, computed once per \
-         field in its first frame and inside the timing; timed apart on a copy): {}.\n\n\
+         what the collider adds to it, and what the field's per-cell vectors cost once \
+         (`DistanceField::cells`, outside the timed runs; timed apart on a field built afresh): {}.\n\n\
          Versions: {version}.\n",
         breakdown.join("; ")
     );

@@ -215,12 +215,17 @@ impl DistanceField {
 
     /// An exact field from a closest-point function (for references, tests and examples):
     /// every cell whose closest surface point is within the band keeps it as its own boundary
-    /// point; the others are far.
+    /// point; the others are far. Its far cells hold exactly the far value and its rows' band
+    /// spans are recorded, as the field stage's are, so its [`DistanceField::cells`] are
+    /// computed for the band alone (a tenth of a 128³ grid's cells at band 3).
     pub fn from_closest_points(spec: GridSpec, band: f32, closest: impl Fn(Vec3) -> Vec3) -> Self {
         let far = band * spec.cell;
         let mut dist = vec![far; spec.len()];
         let mut nearest = vec![Self::FAR; spec.len()];
         let mut points = Vec::new();
+        let nx = spec.dims.x as usize;
+        // Per row `[lo, hi)` of its band cells (`lo == hi`: none), as `band_span` gives them.
+        let mut spans = vec![[0u32; 2]; spec.len() / nx];
         for i in 0..spec.len() {
             let x = spec.center(spec.coords(i));
             let p = closest(x);
@@ -229,6 +234,12 @@ impl DistanceField {
                 dist[i] = d;
                 nearest[i] = points.len() as u32;
                 points.push(p);
+                let span = &mut spans[i / nx];
+                let at = (i % nx) as u32;
+                if span[0] == span[1] {
+                    span[0] = at;
+                }
+                span[1] = at + 1;
             }
         }
         DistanceField {
@@ -239,7 +250,7 @@ impl DistanceField {
             points: Arc::new(points),
             faces: None,
             inside: None,
-            cells: Default::default(),
+            cells: LazyCells::built(None, Some(spans.into())),
         }
     }
 
@@ -630,5 +641,54 @@ mod tests {
             .map(|x| if x % 37 == 5 { x } else { FAR })
             .collect();
         assert_eq!(band_span(&row), Some(5..117));
+    }
+
+    /// The rows' spans a field from closest points records are the plain scans' (`lo == hi`
+    /// where a row has no band cell), and its cells, computed over those spans alone, are the
+    /// bits of the cells computed over every cell (a clone's, which knows no spans), with the
+    /// same far bricks and band cells.
+    fn spans_and_cells_as_every_cell(field: &DistanceField) {
+        let nx = field.spec.dims.x as usize;
+        let spans = field.band_spans().expect("recorded");
+        assert_eq!(spans.len(), field.spec.len() / nx);
+        for (r, &[lo, hi]) in spans.iter().enumerate() {
+            let near = &field.nearest[r * nx..(r + 1) * nx];
+            let span = (lo < hi).then_some(lo as usize..hi as usize);
+            assert_eq!(span, plain_span(near), "row {r}");
+            assert!(lo <= hi && hi as usize <= nx, "row {r}: {lo}..{hi}");
+        }
+        let every = field.clone();
+        assert!(every.band_spans().is_none());
+        let bits = |c: &[Vec4]| {
+            c.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(field.cells()), bits(every.cells()));
+        assert_eq!(field.band_cells(), every.band_cells());
+        let d = field.spec.dims;
+        for c in (0..d.x * d.y * d.z).map(|i| [i % d.x, (i / d.x) % d.y, i / (d.x * d.y)]) {
+            let c = c.map(|k| k as usize);
+            assert_eq!(
+                field.far_bricks().all_far(c),
+                every.far_bricks().all_far(c),
+                "{c:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn closest_points_cells_from_the_band_spans_are_every_cells() {
+        // Sides that are not whole bricks; a sphere off centre (rows with one span, rows with
+        // none), a plane along whole rows, and a band of every cell (spans from 0 to nx).
+        let spec = GridSpec::new(Vec3::splat(-0.5), 0.05, UVec3::new(21, 14, 19)).unwrap();
+        let c = Vec3::new(0.07, -0.03, 0.11);
+        let sphere = |p: Vec3| c + 0.3 * (p - c).try_normalize().unwrap_or(Vec3::X);
+        spans_and_cells_as_every_cell(&DistanceField::from_closest_points(spec, 2.5, sphere));
+        let plane = |p: Vec3| p.with_y(0.012);
+        spans_and_cells_as_every_cell(&DistanceField::from_closest_points(spec, 3.0, plane));
+        let wide = DistanceField::from_closest_points(spec, 40.0, sphere);
+        assert!(wide.band_spans().unwrap().iter().all(|s| *s == [0, 21]));
+        spans_and_cells_as_every_cell(&wide);
     }
 }

@@ -18,11 +18,12 @@ use super::solid::ClosedCache;
 use glam::{IVec3, UVec3, Vec3};
 use imprint_core::buckets::Buckets;
 use imprint_core::cache::prefetch;
-use imprint_core::closest::Batch;
+use imprint_core::closest::{Batch, LANES};
 use imprint_core::geom::{ceil_i, floor_i, triangle_box_overlap};
 use imprint_core::pool::Pool;
 use imprint_core::{Boundary, BoundaryVariant, GridSpec, Mesh, Result};
 use rayon::prelude::*;
+use std::hint::select_unpredictable;
 use std::sync::Arc;
 
 /// Half-size of the closed cell box in the overlap test: a hair over 0.5 so that a triangle
@@ -301,30 +302,18 @@ fn propose_slab(
     // the proposals do not depend on the order.
     // Tagged with the cell's coordinates: the box test's centre without three divisions.
     let mut batch = Batch::<(IVec3, u32)>::default();
-    let mut propose = |(at, ti): (IVec3, u32), q: Vec3, d2: f32| {
-        // Outside the circumscribed sphere: no contact. A cell that already holds a smaller
-        // key: nothing to change (the key is a minimum and the cell is marked). Inside the
-        // inscribed sphere, or the closest point inside the box: contact (half the pairs in
-        // between, for the bunny). Otherwise: the exact test.
-        if d2 > 3.0 * CELL_HALF * CELL_HALF {
-            return;
-        }
-        let key = ((d2.to_bits() as u64) << 32) | ti as u64;
-        let [x, y, z] = at.to_array().map(|c| c as usize);
-        let local = x + nx * y + nxy * z - base;
-        if key >= best[local] {
-            return;
-        }
-        if d2 > 0.25 {
-            let centre = at.as_vec3();
-            let in_box = (q - centre).abs().cmple(Vec3::splat(CELL_HALF)).all();
-            let [a, b, c] = mesh.triangles[ti as usize].map(|i| verts[i as usize]);
-            if !in_box && !triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c) {
-                return;
-            }
-        }
-        best[local] = key;
-        occupied[local / 64] |= 1u64 << (local % 64);
+    let mut keys = Keys {
+        best,
+        occupied,
+        base,
+        nx,
+        nxy,
+        exact: [(0, 0); LANES],
+        len: 0,
+    };
+    let run = |batch: &mut Batch<(IVec3, u32)>, keys: &mut Keys| {
+        batch.run(|tag, q, d2| keys.propose(tag, q, d2));
+        keys.settle_exact(verts, mesh);
     };
     for (k, &ti) in tris.iter().enumerate() {
         // A triangle's indices sixteen triangles ahead, its corners six ahead (their indices
@@ -368,13 +357,76 @@ fn propose_slab(
                         continue;
                     }
                     if batch.push(centre, [a, b, c], (at, ti)) {
-                        batch.run(&mut propose);
+                        run(&mut batch, &mut keys);
                     }
                 }
             }
         }
     }
-    batch.run(&mut propose);
+    run(&mut batch, &mut keys);
+}
+
+/// A slab's smallest proposed key per cell (`best`, marked in `occupied`), as pass 1 makes
+/// them a batch of pairs at a time; the pairs that need the exact box test wait for it until
+/// the batch is through.
+struct Keys<'a> {
+    best: &'a mut [u64],
+    occupied: &'a mut [u64],
+    /// The slab's first cell, and the grid's cells per row and per layer.
+    base: usize,
+    nx: usize,
+    nxy: usize,
+    /// This batch's pairs for the exact test: the cell (in the slab) and the key.
+    exact: [(usize, u64); LANES],
+    len: usize,
+}
+
+impl Keys<'_> {
+    /// A pair's proposal: its closest point `q` to the cell's centre (grid units), `d2` the
+    /// squared distance. Outside the circumscribed sphere: no contact. Inside the inscribed
+    /// sphere, or the closest point inside the box: contact (half the pairs in between, for
+    /// the bunny), taken without a branch (which was a coin toss to the predictor); the rest
+    /// wait for the exact test. A key no smaller than the cell's holds nothing new (the key is
+    /// a minimum and the cell is marked).
+    #[inline(always)]
+    fn propose(&mut self, (at, ti): (IVec3, u32), q: Vec3, d2: f32) {
+        let key = ((d2.to_bits() as u64) << 32) | ti as u64;
+        let [x, y, z] = at.to_array().map(|c| c as usize);
+        let local = x + self.nx * y + self.nxy * z - self.base;
+        let held = self.best[local];
+        let in_box = (q - at.as_vec3()).abs().cmple(Vec3::splat(CELL_HALF)).all();
+        // As the branches they replace, a NaN is neither outside nor between the spheres.
+        let (outside, between) = (d2 > 3.0 * CELL_HALF * CELL_HALF, d2 > 0.25);
+        let new = !outside & (key < held);
+        let take = new & (!between | in_box);
+        self.best[local] = select_unpredictable(take, key, held);
+        self.occupied[local / 64] |= (take as u64) << (local % 64);
+        self.exact[self.len] = (local, key);
+        self.len += (new & !take) as usize;
+    }
+
+    /// The waiting pairs' exact tests (their triangle is the key's low half), in the order
+    /// proposed; each taken where it beats the cell's key by then.
+    #[inline(always)]
+    fn settle_exact(&mut self, verts: &[Vec3], mesh: &Mesh) {
+        for &(local, key) in &self.exact[..std::mem::take(&mut self.len)] {
+            if key >= self.best[local] {
+                continue;
+            }
+            let cell = local + self.base;
+            let centre = Vec3::new(
+                (cell % self.nx) as f32,
+                (cell % self.nxy / self.nx) as f32,
+                (cell / self.nxy) as f32,
+            );
+            let ti = (key & 0xffff_ffff) as usize;
+            let [a, b, c] = mesh.triangles[ti].map(|i| verts[i as usize]);
+            if triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c) {
+                self.best[local] = key;
+                self.occupied[local / 64] |= 1u64 << (local % 64);
+            }
+        }
+    }
 }
 
 /// Pass 2 of a slab whose first cell is `base`: its surface cells in increasing index, with
@@ -436,7 +488,104 @@ pub fn cell_coords(spec: &GridSpec, cell: u32) -> UVec3 {
 
 #[cfg(test)]
 mod tests {
-    use super::SlabBins;
+    use super::{CELL_HALF, EMPTY, Keys, LANES, SlabBins};
+    use glam::{IVec3, Vec3};
+    use imprint_core::Mesh;
+    use imprint_core::geom::{closest_point_on_triangle, triangle_box_overlap};
+
+    /// The branches [`Keys`] replaced, one proposal at a time (the reference).
+    fn propose_branching(best: &mut [u64], mesh: &Mesh, at: IVec3, ti: u32, nx: usize) {
+        let [a, b, c] = mesh.triangles[ti as usize].map(|i| mesh.positions[i as usize]);
+        let centre = at.as_vec3();
+        let q = closest_point_on_triangle(centre, a, b, c);
+        let d2 = (q - centre).length_squared();
+        if d2 > 3.0 * CELL_HALF * CELL_HALF {
+            return;
+        }
+        let key = ((d2.to_bits() as u64) << 32) | ti as u64;
+        let local = at.x as usize + nx * (at.y as usize + nx * at.z as usize);
+        if key >= best[local] {
+            return;
+        }
+        if d2 > 0.25 {
+            let in_box = (q - centre).abs().cmple(Vec3::splat(CELL_HALF)).all();
+            if !in_box && !triangle_box_overlap(centre, Vec3::splat(CELL_HALF), a, b, c) {
+                return;
+            }
+        }
+        best[local] = key;
+    }
+
+    /// A slab's keys proposed a batch at a time, the exact box tests after each batch, are
+    /// the keys proposed one at a time with the branches, whatever the order of the pairs:
+    /// triangles crossing a few cells in every way (inside either sphere, between them in and
+    /// out of the box, beyond), each cell proposed to by several, batches cut anywhere.
+    #[test]
+    fn keys_a_batch_at_a_time_are_the_branching_keys_in_any_order() {
+        let nx = 4;
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        let mut seed = 777u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for t in 0..60u32 {
+            let centre = Vec3::new(next(), next(), next()) * 3.0;
+            let size = [0.2, 0.6, 1.5][t as usize % 3];
+            for _ in 0..3 {
+                positions.push(centre + (Vec3::new(next(), next(), next()) - 0.5) * size);
+            }
+            triangles.push([3 * t, 3 * t + 1, 3 * t + 2]);
+        }
+        let mesh = Mesh::new(positions, triangles, "keys test").unwrap();
+        let cells = (0..nx * nx * nx).map(|i| IVec3::new(i % nx, i / nx % nx, i / (nx * nx)));
+        let mut pairs: Vec<(IVec3, u32)> =
+            cells.flat_map(|at| (0..60).map(move |t| (at, t))).collect();
+        let n = (nx * nx * nx) as usize;
+        let mut want = vec![EMPTY; n];
+        for &(at, ti) in &pairs {
+            propose_branching(&mut want, &mesh, at, ti, nx as usize);
+        }
+        assert!(want.iter().filter(|&&k| k != EMPTY).count() > n / 2);
+        for round in 0..6 {
+            // Shuffled pairs; every other round grouped by cell (a cell's pairs then share
+            // batches, where a deferred key may be beaten before its test), batches of
+            // several sizes up to `LANES`.
+            for i in (1..pairs.len()).rev() {
+                pairs.swap(i, (next() * (i + 1) as f32) as usize % (i + 1));
+            }
+            if round % 2 == 1 {
+                pairs.sort_by_key(|(at, _)| (at.z, at.y, at.x));
+            }
+            let (mut best, mut occupied) = (vec![EMPTY; n], vec![0u64; n.div_ceil(64)]);
+            let mut keys = Keys {
+                best: &mut best,
+                occupied: &mut occupied,
+                base: 0,
+                nx: nx as usize,
+                nxy: (nx * nx) as usize,
+                exact: [(0, 0); LANES],
+                len: 0,
+            };
+            for batch in pairs.chunks([1, LANES, 7, LANES, 23, 16][round]) {
+                for &(at, ti) in batch {
+                    let [a, b, c] = mesh.triangles[ti as usize].map(|i| mesh.positions[i as usize]);
+                    let q = closest_point_on_triangle(at.as_vec3(), a, b, c);
+                    keys.propose((at, ti), q, (q - at.as_vec3()).length_squared());
+                }
+                keys.settle_exact(&mesh.positions, &mesh);
+            }
+            assert_eq!(best, want, "round {round}");
+            for (i, &k) in want.iter().enumerate() {
+                assert_eq!(
+                    occupied[i / 64] >> (i % 64) & 1 == 1,
+                    k != EMPTY,
+                    "cell {i}"
+                );
+            }
+        }
+    }
 
     /// The bins against a plain scan: every slab lists exactly the triangles whose layers
     /// reach it, in increasing index, across several chunks and with empty ranges.
