@@ -88,6 +88,8 @@ fn check_flags(args: &[String]) {
 }
 
 fn main() {
+    // As the `imprint` binary runs its stages.
+    imprint_core::pool::retain_freed_memory();
     let args: Vec<String> = std::env::args().collect();
     check_flags(&args);
     let arg = |k: &str| {

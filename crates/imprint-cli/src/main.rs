@@ -254,6 +254,7 @@ fn parse_size(s: &str) -> Result<[u32; 2], String> {
 }
 
 fn main() -> ExitCode {
+    imprint_core::pool::retain_freed_memory();
     let cli = Cli::parse();
     // Before anything else runs, while this is the only thread (see `quiet_display_probe`).
     quiet_display_probe();
