@@ -245,13 +245,14 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
          benchmark; {}³ cells of {:.2} mm to show what the field's size costs), band \
          {FIELD_BAND} cells, built once outside the timing, as are its per-cell vectors \
          (`DistanceField::cells`, computed on the field's first read, in the warm-up run, and \
-         kept with it: the sphere does not move). Taichi (`ti.init(arch=ti.cpu)`, `benches/compare/cloth_taichi.py`, one \
-         kernel call per substep) tests the analytic sphere with the same projection and \
-         friction (imprint's `contact::respond`). **ms/frame** = total time of the {FRAMES} \
-         frames / {FRAMES}, median of {runs} runs after one warm-up run (imprint) or after one \
-         untimed frame for the JIT compile (Taichi); **median frame** = median single frame of \
-         the last run; **ns/p·s** = ms/frame / (N² × {SUBSTEPS}). Heights are the mean y of \
-         the cloth after the last frame; **Δh** = imprint − Taichi (both f32), and in brackets \
+         kept with it: the sphere does not move). Taichi (`ti.init(arch=ti.cpu)`, \
+         `benches/compare/cloth_taichi.py`, one kernel call per substep) tests the analytic \
+         sphere with the same projection and friction (imprint's `contact::respond`). \
+         **ms/frame** = total time of the {FRAMES} frames / {FRAMES}, median of {runs} runs \
+         after one warm-up run (imprint) or after one untimed frame for the JIT compile \
+         (Taichi); **median frame** = median single frame of the last run; **ns/p·s** = \
+         ms/frame / (N² × {SUBSTEPS}). Heights are the mean y of the cloth after the last \
+         frame; **Δh** = imprint − Taichi (both f32), and in brackets \
          Taichi f32 − Taichi f64 (the same script with `--f64`, one run): how far f32 \
          rounding alone moves this drape. Contact error (imprint, worst frame): `inside` = \
          most particles found inside the sphere in one substep, `close_max_depth` = how far \
@@ -311,7 +312,7 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
             let rest = ours - free;
             breakdown.push(format!(
                 "N = {n}, field {res}³: {rest:.2} ms ({:.1} ns per particle-substep) for reading \
-                 the field and the contact response; the field's cells {once:.1} ms once",
+                 the field and the contact response, and the field's cells {once:.1} ms once",
                 rest * 1e6 / particle_substeps
             ));
             let (t_cols, ratio, t_h, dh, t_gap) = match &taichi {
@@ -370,7 +371,8 @@ fn versus_taichi(root: &Path, repeat: usize, s: &mut String) {
         s,
         "\nWhere imprint's time goes: the same cloth with no collider (median of {runs} runs), \
          what the collider adds to it, and what the field's per-cell vectors cost once \
-         (`DistanceField::cells`, outside the timed runs; timed apart on a field built afresh): {}.\n\n\
+         (`DistanceField::cells`, outside the timed runs; timed apart on a field built \
+         afresh): {}.\n\n\
          Versions: {version}.\n",
         breakdown.join("; ")
     );

@@ -1,7 +1,8 @@
 //! Scratch buffers shared by the tasks of a parallel pass: a task takes one (or makes one when
 //! none is free) and gives it back, so a pass run frame after frame allocates a few tasks'
 //! worth once, not a buffer per task per frame (a fresh buffer of a few hundred KiB is
-//! fresh pages, a fault each). The voxeliser's slab keys and the field's slab distances.
+//! fresh pages, a fault each). The voxeliser's slab keys and the field's slab distances. And
+//! the process-wide half of the same: [`retain_freed_memory`], which the binaries call.
 
 use rayon::prelude::*;
 use std::sync::Mutex;

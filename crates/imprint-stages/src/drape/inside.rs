@@ -930,9 +930,9 @@ impl Keep for &mut Vec<f64> {
 const CROSS_LANES: usize = 4;
 
 /// [`crossing`] of each of the triangles `four` names in `tris` (one to [`CROSS_LANES`]): the
-/// crossings' axis coordinates and a bit per triangle crossed. AVX where the CPU has it (decided once per process): the
-/// same operations in the same order, so the same bits, and no branch per triangle (whether
-/// a candidate is crossed is a coin toss to the predictor).
+/// crossings' axis coordinates and a bit per triangle crossed. AVX where the CPU has it
+/// (decided once per process): the same operations in the same order, so the same bits, and
+/// no branch per triangle (whether a candidate is crossed is a coin toss to the predictor).
 #[inline]
 fn crossings(tris: &[Tri2], four: &[u32], q: DVec2) -> ([f64; CROSS_LANES], u32) {
     #[cfg(target_arch = "x86_64")]

@@ -693,10 +693,10 @@ const WINDOW: usize = 8;
 
 /// The same writes as [`splat_point`] for bands <= 3, faster: every row is the fixed window of
 /// `WINDOW` cells around the point, so there are no square roots or range computations per row
-/// and the row vectorises. Cells outside the ball fail the `d² < best` test as
-/// they do in `splat_point` (whose best starts just above a²), and d² is the same expression,
-/// so the result is identical, rows outside the ball included. Returns false, writing nothing, when the window would leave
-/// the grid (points near its x faces take `splat_point`).
+/// and the row vectorises. Cells outside the ball fail the `d² < best` test as they do in
+/// `splat_point` (whose best starts just above a²), and d² is the same expression, so the
+/// result is identical, rows outside the ball included. Returns false, writing nothing, when
+/// the window would leave the grid (points near its x faces take `splat_point`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn splat_point_window<const AVX2: bool>(
