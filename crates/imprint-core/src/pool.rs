@@ -14,10 +14,9 @@ use std::sync::Mutex;
 /// afresh at every call (the drape's inside test, some 20 MB a call) then paid for them again
 /// at every call, or not, as that threshold had moved, which changed with unrelated code (two
 /// builds of the drape that differed only in its ray walks: 23 thousand page faults in 40
-/// calls against 190 thousand, and 19 against 28 ms a call). Blocks
-/// up to 32 MiB (glibc's most) now come from its heaps, which it no longer trims: what the
-/// process frees stays with it, up to its peak. The binaries call this first thing, before any
-/// thread starts.
+/// calls against 190 thousand, and 19 against 28 ms a call). Blocks up to 32 MiB (glibc's
+/// most) now come from its heaps, which it no longer trims: what the process frees stays with
+/// it, up to its peak. The binaries call this first thing, before any thread starts.
 pub fn retain_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: `mallopt` sets allocator parameters; called before other threads allocate.
