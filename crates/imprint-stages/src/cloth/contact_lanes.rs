@@ -70,7 +70,7 @@ pub fn touch(
     t: &Touch,
     eps: f32,
     friction: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> Option<Touched> {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
@@ -88,7 +88,7 @@ unsafe fn touch_avx2(
     t: &Touch,
     eps: f32,
     friction: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> Option<Touched> {
     touch_lanes(f, t, eps, friction, corners)
 }
@@ -111,7 +111,7 @@ pub(super) fn touch_lanes(
     t: &Touch,
     eps: f32,
     friction: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> Option<Touched> {
     let SignedLanes {
         some,
@@ -183,7 +183,7 @@ fn signed_lanes(
     Fields { end, start }: Fields,
     t: &Touch,
     eps: f32,
-    [end_corners, start_corners]: &mut [Corners; 2],
+    [end_corners, start_corners]: [&mut Corners; 2],
 ) -> Option<SignedLanes> {
     let end_cells = end.cell_lanes(t.x);
     let start_cells = start.map(|(f, _)| f.cell_lanes(t.x));
@@ -282,7 +282,7 @@ pub fn resting(
     x: &[Lanes; 3],
     side: &[Lanes; 4],
     eps: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> [Option<f32>; LANES] {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
@@ -300,7 +300,7 @@ unsafe fn resting_avx2(
     x: &[Lanes; 3],
     side: &[Lanes; 4],
     eps: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> [Option<f32>; LANES] {
     resting_lanes(f, x, side, eps, corners)
 }
@@ -311,7 +311,7 @@ fn resting_lanes(
     x: &[Lanes; 3],
     side: &[Lanes; 4],
     eps: f32,
-    corners: &mut [Corners; 2],
+    corners: [&mut Corners; 2],
 ) -> [Option<f32>; LANES] {
     let t = Touch {
         x,
@@ -500,7 +500,7 @@ mod tests {
         s: f32,
         t: &Touch,
         eps: f32,
-        corners: &mut [Corners; 2],
+        corners: [&mut Corners; 2],
     ) -> u32 {
         let got = resting(fields, t.x, t.side, eps, corners);
         for (m, got) in got.iter().enumerate() {
@@ -580,7 +580,7 @@ mod tests {
                 let mut owned = first;
                 owned.x.iter_mut().flatten().for_each(|x| *x += nudge);
                 let t = owned.touch();
-                let lanes = or_unchanged(touch(fields, &t, eps, friction, &mut kept), &t);
+                let lanes = or_unchanged(touch(fields, &t, eps, friction, kept.each_mut()), &t);
                 let (d, v, in_band) =
                     view.sample_lanes(t.x, &view.cell_lanes(t.x), &mut Corners::default());
                 for m in 0..LANES {
@@ -593,12 +593,19 @@ mod tests {
                     );
                     assert_eq!(in_band[m], f.in_band);
                 }
-                let plain = touch_lanes(fields, &t, eps, friction, &mut Default::default());
+                let plain = touch_lanes(
+                    fields,
+                    &t,
+                    eps,
+                    friction,
+                    <[Corners; 2]>::default().each_mut(),
+                );
                 let plain = or_unchanged(plain, &t);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
                 (hits, inside) = (hits + h, inside + i);
-                resting_samples += resting_as_scalar(&collider, fields, 1.0, &t, eps, &mut kept);
+                resting_samples +=
+                    resting_as_scalar(&collider, fields, 1.0, &t, eps, kept.each_mut());
             }
         }
         // The cases were met: contacts, and particles found across the surface.
@@ -636,13 +643,20 @@ mod tests {
                     end: &vb,
                     start: Some((&va, s)),
                 };
-                let lanes = or_unchanged(touch(fields, &t, eps, friction, &mut kept), &t);
-                let plain = touch_lanes(fields, &t, eps, friction, &mut Default::default());
+                let lanes = or_unchanged(touch(fields, &t, eps, friction, kept.each_mut()), &t);
+                let plain = touch_lanes(
+                    fields,
+                    &t,
+                    eps,
+                    friction,
+                    <[Corners; 2]>::default().each_mut(),
+                );
                 let plain = or_unchanged(plain, &t);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
                 (hits, inside, misses) = (hits + h, inside + i, misses + b);
-                resting_samples += resting_as_scalar(&collider, fields, s, &t, eps, &mut kept);
+                resting_samples +=
+                    resting_as_scalar(&collider, fields, s, &t, eps, kept.each_mut());
             }
         }
         assert!(

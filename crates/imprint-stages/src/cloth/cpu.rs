@@ -218,11 +218,13 @@ pub struct ClothSim {
     backup_side: SideMemory,
     /// Per particle and collider: outward direction at the last sample (see `contact`).
     side: SideMemory,
-    /// Per block of [`LANES`] particles and collider, the cells its end and start fields
-    /// were last read at (kept through a frame's substeps, whose fields do not change, and
-    /// read again by the frame pass after them).
+    /// Per block of [`LANES`] particles and collider, the cells its end fields (`[0]`) and
+    /// start fields (`[1]`) were last read at (kept through a frame's substeps, whose fields
+    /// do not change, and read again by the frame pass after them). Apart, not in pairs: a
+    /// body that does not move reads only the end fields, which then stream through the
+    /// caches without the start's unread half between them.
     #[serde(skip)]
-    corners: Vec<[Corners; 2]>,
+    corners: [Vec<Corners>; 2],
     stats: Vec<SubstepStats>,
     dt_prev: Option<f32>,
     first_energy: Option<f64>,
@@ -337,7 +339,7 @@ impl ClothSim {
             },
             side: SideMemory::new(n, 0),
             backup_side: SideMemory::default(),
-            corners: Vec::new(),
+            corners: Default::default(),
             stats: vec![SubstepStats::new(); n.div_ceil(CHUNK)],
             dt_prev: None,
             first_energy: None,
@@ -693,8 +695,10 @@ impl ClothSim {
     /// what they hold: nothing held from the last frame's fields.
     fn forget_corners(&mut self, colliders: usize) {
         let corners = self.len().div_ceil(CHUNK) * (CHUNK / LANES) * colliders.max(1);
-        self.corners.resize_with(corners, Default::default);
-        self.corners.iter_mut().flatten().for_each(Corners::forget);
+        for held in &mut self.corners {
+            held.resize_with(corners, Default::default);
+            held.iter_mut().for_each(Corners::forget);
+        }
     }
 
     fn check(&self, sub: &SubstepStats, ke_limit: f64) -> std::result::Result<(), String> {
@@ -759,17 +763,22 @@ impl ClothSim {
         };
         let nf = colliders.len().max(1);
         let out = &mut self.lanes_next;
+        let [end_corners, start_corners] = &mut self.corners;
         out.x
             .par_chunks_mut(CHUNK)
             .zip(out.y.par_chunks_mut(CHUNK))
             .zip(out.z.par_chunks_mut(CHUNK))
             .zip(self.side.runs_mut(CHUNK / LANES))
-            .zip(self.corners.par_chunks_mut(CHUNK / LANES * nf))
+            .zip(end_corners.par_chunks_mut(CHUNK / LANES * nf))
+            .zip(start_corners.par_chunks_mut(CHUNK / LANES * nf))
             .zip(self.stats.par_iter_mut())
             .enumerate()
-            .for_each(|(c, (((((x, y), z), side), corners), stats))| {
+            .for_each(|(c, ((((((x, y), z), side), end), start), stats))| {
                 let mut st = SubstepStats::new();
-                let memory = Memory { side, corners };
+                let memory = Memory {
+                    side,
+                    corners: [end, start],
+                };
                 update_chunk(c * CHUNK, &ctx, [x, y, z], memory, &mut st);
                 *stats = st;
             });
@@ -810,34 +819,39 @@ impl ClothSim {
             pos: &pos,
             prev: &prev,
         };
-        self.frame_pass(springs, &[], &[], &mut []).energy
+        self.frame_pass(springs, &[], &[], [&mut [], &mut []])
+            .energy
     }
 
     /// One pass over the particles after a frame: energies, the largest strain, and the
     /// particles still closer than ε to a collider (or the ground). Partial sums per fixed
     /// chunk, then over chunks in order, so the result does not depend on the threads.
-    /// `corners` are laid out as the substeps' (whole chunks of blocks per collider; none
-    /// without colliders) and hold the colliders' cells or nothing ([`Corners`]): after a
+    /// `end` and `start` are laid out as the substeps' (whole chunks of blocks per collider;
+    /// none without colliders) and hold the colliders' cells or nothing ([`Corners`]): after a
     /// frame, the cells its last substep read, which the particles have mostly not left.
     fn frame_pass(
         &self,
         springs: SpringsAt,
         colliders: &[Collider],
         depth: &[DepthCollider],
-        corners: &mut [[Corners; 2]],
+        [end, start]: [&mut [Corners]; 2],
     ) -> FramePass {
         let chunks = self.len().div_ceil(CHUNK);
         let parts: Vec<FramePass> = if colliders.is_empty() {
             (0..chunks)
                 .into_par_iter()
-                .map(|c| self.chunk_pass(c, springs, colliders, depth, &mut []))
+                .map(|c| self.chunk_pass(c, springs, colliders, depth, [&mut [], &mut []]))
                 .collect()
         } else {
             let per_chunk = CHUNK / LANES * colliders.len();
-            corners[..chunks * per_chunk]
+            let starts = start[..chunks * per_chunk].par_chunks_mut(per_chunk);
+            end[..chunks * per_chunk]
                 .par_chunks_mut(per_chunk)
+                .zip(starts)
                 .enumerate()
-                .map(|(c, corners)| self.chunk_pass(c, springs, colliders, depth, corners))
+                .map(|(c, (end, start))| {
+                    self.chunk_pass(c, springs, colliders, depth, [end, start])
+                })
                 .collect()
         };
         let mut total = FramePass::default();
@@ -857,7 +871,7 @@ impl ClothSim {
         springs: SpringsAt,
         colliders: &[Collider],
         depth: &[DepthCollider],
-        corners: &mut [[Corners; 2]],
+        corners: [&mut [Corners]; 2],
     ) -> FramePass {
         let mut part = FramePass::default();
         let range = c * CHUNK..((c + 1) * CHUNK).min(self.len());
@@ -882,7 +896,7 @@ impl ClothSim {
         &self,
         range: std::ops::Range<usize>,
         colliders: &[Collider],
-        corners: &mut [[Corners; 2]],
+        [end, start]: [&mut [Corners]; 2],
     ) -> Vec<f32> {
         let (pos, eps) = (&self.state.pos, self.params.collision.epsilon);
         let mut worst = vec![f32::NEG_INFINITY; range.len()];
@@ -912,7 +926,8 @@ impl ClothSim {
                     (0..3).for_each(|a| x[a][m] = pos[i][a]);
                 }
                 let side = self.side.block(b / LANES, k);
-                let corners = &mut corners[(b - range.start) / LANES * nf + k];
+                let i = (b - range.start) / LANES * nf + k;
+                let corners = [&mut end[i], &mut start[i]];
                 let found = contact_lanes::resting(fields, &x, side, eps, corners);
                 for (worst, d) in worst.iter_mut().zip(found) {
                     if let Some(d) = d {
@@ -1005,7 +1020,8 @@ impl ClothSim {
         last: &SubstepStats,
     ) -> ClothFrameMetrics {
         let mut corners = std::mem::take(&mut self.corners);
-        let pass = self.frame_pass(self.springs_at(), colliders, depth, &mut corners);
+        let held = corners.each_mut().map(|c| c.as_mut_slice());
+        let pass = self.frame_pass(self.springs_at(), colliders, depth, held);
         self.corners = corners;
         let total = pass.energy.total();
         let first = *self.first_energy.get_or_insert(total);
@@ -1136,10 +1152,11 @@ impl ClothSim {
 }
 
 /// What a chunk of particles keeps between substeps: per block and collider its side
-/// memory ([`SideMemory`]) and the cells last read ([`Corners`]).
+/// memory ([`SideMemory`]) and the cells last read from its end and start fields
+/// ([`Corners`]).
 struct Memory<'a> {
     side: &'a mut [SideLanes],
-    corners: &'a mut [[Corners; 2]],
+    corners: [&'a mut [Corners]; 2],
 }
 
 /// Colliders read at their end-of-frame `fields` alone: what a frame's residual contact reads
@@ -1435,7 +1452,9 @@ fn touch_block(
         end: &collider.end,
         start: collider.start.as_ref().filter(|_| w < 1.0).map(|f| (f, w)),
     };
-    let corners = &mut memory.corners[k0 / LANES * nf + c];
+    let i = k0 / LANES * nf + c;
+    let [end, start] = &mut memory.corners;
+    let corners = [&mut end[i], &mut start[i]];
     let Some(r) = contact_lanes::touch_lanes(fields, &t, ctx.eps, ctx.friction, corners) else {
         return;
     };
@@ -1616,7 +1635,8 @@ mod tests {
             let colliders = end_colliders(&fields);
             let mut fresh = sim.corners.clone();
             fresh.iter_mut().flatten().for_each(Corners::forget);
-            let afresh = sim.frame_pass(sim.springs_at(), &colliders, &[], &mut fresh);
+            let held = fresh.each_mut().map(|c| c.as_mut_slice());
+            let afresh = sim.frame_pass(sim.springs_at(), &colliders, &[], held);
             assert_eq!(m.close, afresh.close, "frame {f}");
             assert_eq!(
                 m.close_max_depth.to_bits(),
