@@ -490,6 +490,12 @@ mod tests {
         })
     }
 
+    /// [`touch_lanes`] (in the caller's build) with no cells held, as [`or_unchanged`] gives it.
+    fn touch_afresh(fields: Fields, t: &Touch, eps: f32, friction: f32) -> Touched {
+        let mut held: [Corners; 2] = Default::default();
+        or_unchanged(touch_lanes(fields, t, eps, friction, held.each_mut()), t)
+    }
+
     /// Checks `lanes` against the per-particle sample and response of `collider` at frame
     /// fraction `s`; returns (hits, particles found inside, band misses).
     /// [`resting`] gives `signed_sample`'s distance at each lane's position with no motion,
@@ -593,14 +599,7 @@ mod tests {
                     );
                     assert_eq!(in_band[m], f.in_band);
                 }
-                let plain = touch_lanes(
-                    fields,
-                    &t,
-                    eps,
-                    friction,
-                    <[Corners; 2]>::default().each_mut(),
-                );
-                let plain = or_unchanged(plain, &t);
+                let plain = touch_afresh(fields, &t, eps, friction);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, _) = same_as_scalar(&collider, 1.0, &t, &lanes, (eps, friction));
                 (hits, inside) = (hits + h, inside + i);
@@ -644,14 +643,7 @@ mod tests {
                     start: Some((&va, s)),
                 };
                 let lanes = or_unchanged(touch(fields, &t, eps, friction, kept.each_mut()), &t);
-                let plain = touch_lanes(
-                    fields,
-                    &t,
-                    eps,
-                    friction,
-                    <[Corners; 2]>::default().each_mut(),
-                );
-                let plain = or_unchanged(plain, &t);
+                let plain = touch_afresh(fields, &t, eps, friction);
                 assert_eq!(format!("{lanes:?}"), format!("{plain:?}"));
                 let (h, i, b) = same_as_scalar(&collider, s, &t, &lanes, (eps, friction));
                 (hits, inside, misses) = (hits + h, inside + i, misses + b);
